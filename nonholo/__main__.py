@@ -1,0 +1,5 @@
+import sys
+
+from nonholo.cli import main
+
+sys.exit(main())

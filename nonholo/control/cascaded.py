@@ -1,0 +1,40 @@
+"""Cascaded design (thesis §4.4, Eq 4.24–4.25; spec leader.md §3.3), after Panteley,
+Lefeber, Loría & Nijmeijer (1998):
+
+    v = v_d + c2 e1 − c3 ω_d e2,          c2 > 0, c3 > −1
+    ω = ω_d + c1 e3        (Eq 4.24, variant "linear")
+    ω = ω_d + c1 sin e3    (Eq 4.25, variant "sine"),      c1 > 0
+
+The heading loop is decoupled; the cross-track error is removed only through ω_d
+(slow pole ≈ −(1 + c3) ω_d² / c2), so a straight line keeps a lateral offset.
+Law signature: see ``nonholo.control.linearization``.
+"""
+from __future__ import annotations
+
+from numba import njit
+
+from nonholo.control.tracking_errors import tracking_errors
+from nonholo.numerics import sincos
+from nonholo.references.feedforward import REF_OMEGA, REF_V
+
+
+@njit(inline="always", error_model="numpy")
+def _driving_speed(c2, c3, e1, e2, v_d, omega_d):
+    return v_d + c2 * e1 - c3 * omega_d * e2
+
+
+@njit(inline="always", error_model="numpy")
+def cascaded_linear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
+    c1, c2, c3 = gains[0, i], gains[1, i], gains[2, i]
+    v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
+    e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
+    return _driving_speed(c2, c3, e1, e2, v_d, omega_d), omega_d + c1 * e3, 0.0, 0.0
+
+
+@njit(inline="always", error_model="numpy")
+def cascaded_sine_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
+    c1, c2, c3 = gains[0, i], gains[1, i], gains[2, i]
+    v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
+    e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
+    sin_e3, _ = sincos(e3)
+    return _driving_speed(c2, c3, e1, e2, v_d, omega_d), omega_d + c1 * sin_e3, 0.0, 0.0

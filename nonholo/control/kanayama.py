@@ -1,0 +1,26 @@
+"""Stable tracking on the linearized error model (thesis §4.5, Eq 4.26; spec leader.md
+§3.4), after Kanayama, Kimura, Miyazaki & Noguchi (1990):
+
+    v = v_d cos e3 + Kx e1
+    ω = ω_d + v_d (Ky e2 + Kθ sin e3),      Kx, Ky, Kθ > 0, v_d > 0
+
+Lyapunov function (e1² + e2²)/2 + (1 − cos e3)/Ky. The lateral loop has natural
+frequency v_d √Ky and damping Kθ / (2√Ky). Law signature: see
+``nonholo.control.linearization``.
+"""
+from __future__ import annotations
+
+from numba import njit
+
+from nonholo.control.tracking_errors import tracking_errors
+from nonholo.numerics import sincos
+from nonholo.references.feedforward import REF_OMEGA, REF_V
+
+
+@njit(inline="always", error_model="numpy")
+def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
+    kx, ky, ktheta = gains[0, i], gains[1, i], gains[2, i]
+    v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
+    e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
+    sin_e3, cos_e3 = sincos(e3)
+    return v_d * cos_e3 + kx * e1, omega_d + v_d * (ky * e2 + ktheta * sin_e3), 0.0, 0.0

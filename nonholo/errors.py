@@ -1,0 +1,30 @@
+"""Exceptions a user can act on. Each carries a one-line message that names what is
+wrong and what was expected; the CLI prints it and exits with code 2."""
+from __future__ import annotations
+
+
+class NonholoInputError(ValueError):
+    """Bad user input: a scenario, a parameter or an expression."""
+
+
+class ScenarioError(NonholoInputError):
+    """A scenario file or object that does not follow the schema.
+
+    ``source`` is the file (or "<scenario>"), ``field`` the dotted path of the offending
+    field (for example ``robots[0].gains.kp``).
+    """
+
+    def __init__(self, source: str, field: str, problem: str):
+        self.source = source
+        self.field = field
+        self.problem = problem
+        where = f"{source}: {field}" if field else source
+        super().__init__(f"{where}: {problem}")
+
+
+class ExpressionError(NonholoInputError):
+    """A mathematical expression string that cannot be parsed safely."""
+
+
+class InfeasibleReferenceError(NonholoInputError):
+    """A reference the chosen controller cannot track (for example v_d = 0)."""

@@ -1,0 +1,89 @@
+"""What every reference trajectory offers: flat outputs and their derivatives at any
+times, the feedforward table the simulator consumes, and a feasibility check."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from nonholo.errors import InfeasibleReferenceError
+from nonholo.references.feedforward import feedforward
+
+FORWARD, BACKWARD = 1, -1
+DIRECTIONS = {"forward": FORWARD, "backward": BACKWARD}
+
+
+class Reference(ABC):
+    """A planar reference p_d(t) = (x_d(t), y_d(t)), twice differentiable.
+
+    Subclasses implement ``flat_outputs``; everything else derives from it.
+    ``direction`` is +1 (drive forward along the path) or −1 (backward).
+    """
+
+    kind: str = "reference"
+
+    def __init__(self, direction: int = FORWARD, default_duration: float | None = None):
+        if direction not in (FORWARD, BACKWARD):
+            raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}")
+        self.direction = direction
+        self.default_duration = default_duration
+
+    @abstractmethod
+    def flat_outputs(self, t: np.ndarray) -> np.ndarray:
+        """(6, len(t)) array: x_d, y_d, ẋ_d, ẏ_d, ẍ_d, ÿ_d at times ``t``."""
+
+    @abstractmethod
+    def describe(self) -> dict:
+        """Parameters and formulas, for reports and JSON."""
+
+    def table(self, t) -> np.ndarray:
+        """Rows (len(t), 10) with the columns of ``feedforward.REF_COLUMNS``."""
+        t = np.asarray(t, dtype=float)
+        flat = self.flat_outputs(t)
+        rows = np.empty((t.size, 10))
+        rows[:, 0] = t
+        rows[:, 1:7] = flat.T
+        theta_d, v_d, omega_d = feedforward(flat[2], flat[3], flat[4], flat[5], self.direction)
+        rows[:, 7] = theta_d
+        rows[:, 8] = v_d
+        rows[:, 9] = omega_d
+        return rows
+
+    def speed(self, t) -> np.ndarray:
+        flat = self.flat_outputs(np.atleast_1d(np.asarray(t, dtype=float)))
+        return np.hypot(flat[2], flat[3])
+
+    def vanishing_speed_times(self, t0: float, t1: float, samples: int = 20_001) -> list[float]:
+        """Times in [t0, t1] where |ṗ_d| = 0 (to within 1e-9 of the peak speed).
+
+        The speed is sampled on a fine grid; every local minimum below 1e-3 of the
+        peak is refined with a bounded scalar minimization, so that zeros between grid
+        points (cusps, rest points) are found too.
+        """
+        t = np.linspace(t0, t1, samples)
+        speed = self.speed(t)
+        scale = max(1.0, float(speed.max()))
+        candidates = np.flatnonzero(speed < 1e-3 * scale)
+        zeros: list[float] = []
+        for i in candidates:
+            if 0 < i < samples - 1 and not (speed[i] <= speed[i - 1] and speed[i] <= speed[i + 1]):
+                continue
+            lo, hi = t[max(i - 1, 0)], t[min(i + 1, samples - 1)]
+            best = minimize_scalar(lambda s: float(self.speed(s)[0]), bounds=(lo, hi), method="bounded",
+                                   options={"xatol": 1e-12 * max(1.0, abs(hi))})
+            t_min, s_min = (float(best.x), float(best.fun)) if best.fun < speed[i] else (float(t[i]), float(speed[i]))
+            if s_min <= 1e-9 * scale and not any(abs(t_min - z) < 1e-6 for z in zeros):
+                zeros.append(t_min)
+        return zeros
+
+    def check_speed(self, t0: float, t1: float, who: str = "this controller") -> None:
+        """Raise ``InfeasibleReferenceError`` naming the times where v_d vanishes."""
+        zeros = self.vanishing_speed_times(t0, t1)
+        if zeros:
+            shown = ", ".join(f"t = {z:.6g} s" for z in zeros[:5])
+            more = f" and {len(zeros) - 5} more" if len(zeros) > 5 else ""
+            raise InfeasibleReferenceError(
+                f"reference speed |dp_d/dt| vanishes at {shown}{more}: the feedforward theta_d, omega_d is "
+                f"undefined there and {who} needs v_d != 0 (use dynamic-feedback, or a reference that keeps moving)"
+            )

@@ -1,0 +1,63 @@
+"""The four reference trajectories of the thesis's Chapter 5 (spec leader.md §5.1), with
+the thesis parameters as defaults. Each is an exact formula, so they share the
+expression machinery (exact derivatives)."""
+from __future__ import annotations
+
+import sympy as sp
+
+from nonholo.references.base import FORWARD
+from nonholo.references.expression import T, ExpressionReference
+
+
+def _number(value) -> sp.Expr:
+    return value if isinstance(value, sp.Basic) else sp.Float(value)
+
+
+class ThesisReference(ExpressionReference):
+    """An ExpressionReference that reports its kind and named parameters."""
+
+    def __init__(self, kind: str, x, y, parameters: dict, default_duration, direction: int = FORWARD):
+        self.kind = kind
+        super().__init__(x, y, direction, float(default_duration),
+                         {k: float(v) for k, v in parameters.items()})
+
+    def describe(self) -> dict:
+        return {**super().describe(), "kind": self.kind}
+
+
+def eight(amplitude_x=10, amplitude_y=10, period_x=40 * sp.pi, period_y=80 * sp.pi,
+          direction: int = FORWARD) -> ThesisReference:
+    """Test 1, figure eight: x_d = A_x sin(2πt/T_x), y_d = A_y sin(2πt/T_y)
+    (thesis: 10 sin(t/20), 10 sin(t/40); one cycle in 80π ≈ 251.33 s)."""
+    ax, ay, tx, ty = map(_number, (amplitude_x, amplitude_y, period_x, period_y))
+    x = ax * sp.sin(2 * sp.pi * T / tx)
+    y = ay * sp.sin(2 * sp.pi * T / ty)
+    params = {"amplitude_x": ax, "amplitude_y": ay, "period_x": tx, "period_y": ty}
+    return ThesisReference("eight", x, y, params, sp.Max(tx, ty), direction)
+
+
+def line(speed=1, heading=sp.pi / 2, start=(0, 0), direction: int = FORWARD) -> ThesisReference:
+    """Test 2, straight line: p_d = start + speed·t·(cos heading, sin heading)
+    (thesis: (0, t), T = 500 s)."""
+    s, h, x0, y0 = map(_number, (speed, heading, *start))
+    params = {"speed": s, "heading": h, "start_x": x0, "start_y": y0}
+    return ThesisReference("line", x0 + s * T * sp.cos(h), y0 + s * T * sp.sin(h), params, 500, direction)
+
+
+def sinusoid(speed=1, amplitude=10, period=2 * sp.pi, direction: int = FORWARD) -> ThesisReference:
+    """Test 3, sinusoid: x_d = speed·t, y_d = A sin(2πt/T) (thesis: (t, 10 sin t), T = 1000 s)."""
+    s, a, p = map(_number, (speed, amplitude, period))
+    params = {"speed": s, "amplitude": a, "period": p}
+    return ThesisReference("sinusoid", s * T, a * sp.sin(2 * sp.pi * T / p), params, 1000, direction)
+
+
+def circle(radius=10, period=40 * sp.pi, center=(0, 0), direction: int = FORWARD) -> ThesisReference:
+    """Test 4, circle: p_d = center + R (cos 2πt/T, sin 2πt/T), counter-clockwise
+    (thesis: 10 (cos t/20, sin t/20), one lap in 40π ≈ 125.66 s)."""
+    r, p, cx, cy = map(_number, (radius, period, *center))
+    phase = 2 * sp.pi * T / p
+    params = {"radius": r, "period": p, "center_x": cx, "center_y": cy}
+    return ThesisReference("circle", cx + r * sp.cos(phase), cy + r * sp.sin(phase), params, p, direction)
+
+
+THESIS_TESTS = {"eight": eight, "line": line, "sinusoid": sinusoid, "circle": circle}
