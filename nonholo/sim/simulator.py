@@ -35,8 +35,8 @@ PROGRESS_WORK = 2e8
 
 
 @cache
-def integrator(law):
-    return make_integrator(law)
+def integrator(law, recording: bool):
+    return make_integrator(law, recording)
 
 
 def _substep_plan(scenario: Scenario, stiffness: float) -> np.ndarray:
@@ -125,7 +125,7 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
         state = _initial_states(scenario, robots, rows)
         group_stats = new_stats(len(robots))
         group_record = np.empty((6, record_array.shape[1], len(robots)))
-        law_rates, integrate, score = integrator(law)
+        law_rates, integrate, score = integrator(law, record)
         if scenario.method == "rk4":
             _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, group_stats, group_record,
                      progress)
@@ -142,7 +142,7 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
 
 def _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, stats, record, progress):
     n_steps = scenario.n_steps
-    held = np.zeros((6, state.shape[1]))
+    held = np.zeros((3, state.shape[1]))
     work = float(plan.sum()) * state.shape[1]
     if progress is None:
         progress = work > PROGRESS_WORK and sys.stderr.isatty()
@@ -169,12 +169,11 @@ def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, 
     """scipy cross-check: DOP853 (Radau for stiff laws), rtol = atol = 1e-10, dense output
     sampled on the same grid and scored by the same compiled code."""
     n = state.shape[1]
-    command = np.zeros((6, n))
     rates = np.empty((4, n))
     reference = scenario.reference
 
     def rhs(t, y):
-        law_rates(y.reshape(4, n), reference.table(np.array([t]))[0], gains, limits, command, rates)
+        law_rates(y.reshape(4, n), reference.table(np.array([t])), gains, limits, rates)
         return rates.ravel().copy()
 
     method = "Radau" if stiffness > STIFF_RATE else "DOP853"
