@@ -28,7 +28,6 @@ _BINARY = {
     ast.Mult: lambda a, b: a * b,
     ast.Div: lambda a, b: a / b,
     ast.Pow: lambda a, b: a**b,
-    ast.BitXor: lambda a, b: a**b,
 }
 _UNARY = {ast.USub: lambda a: -a, ast.UAdd: lambda a: a}
 MAX_LENGTH = 10_000
@@ -49,7 +48,8 @@ def parse_expression(text: str, names: Mapping[str, sp.Expr]) -> sp.Expr:
     if len(text) > MAX_LENGTH:
         raise ExpressionError(f"formula longer than {MAX_LENGTH} characters")
     try:
-        tree = ast.parse(text.strip(), mode="eval")
+        # ^ is a power for users; Python's ^ (xor) binds looser than -, so rewrite, not remap.
+        tree = ast.parse(text.strip().replace("^", "**"), mode="eval")
     except SyntaxError as exc:
         raise ExpressionError(f"cannot parse {text!r}: {exc.msg} at column {exc.offset}") from None
     try:

@@ -5,7 +5,8 @@ Why our own sincos: numba compiles ``math.sin`` to a call into libm, which stops
 vectorizing the loop over robots (and the PyPI llvmlite has no SVML). The kernels below
 are branch-free (selects only), so a loop calling them compiles to SIMD code. Accuracy:
 Cody–Waite reduction by π/2 with a three-part constant, then the fdlibm minimax
-polynomials on [−π/4, π/4]; the error is within a few ulp of libm for |x| < 1e9.
+polynomials on [−π/4, π/4]; the error is within a few ulp of libm for |x| < 2²⁰·π/2
+(≈ 1.6e6 rad, where the split constant stops being exact; headings never get near).
 """
 from __future__ import annotations
 

@@ -197,7 +197,7 @@ def _stable_identity(law) -> None:
     """Give the law's dispatcher a deterministic pickling identity. numba keys its disk
     cache of a closure on the pickled closure variables, and a dispatcher pickles with a
     random per-process uuid unless one was set: without this every process recompiles."""
-    if getattr(law, "_Dispatcher__uuid", None) is None:
+    if getattr(law, "_MemoMixin__uuid", None) is None:
         law._set_uuid(f"{law.py_func.__module__}.{law.py_func.__qualname__}")
 
 

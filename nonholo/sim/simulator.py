@@ -16,7 +16,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from nonholo.control.registry import ControllerConfig
-from nonholo.errors import InfeasibleReferenceError
+from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 from nonholo.sim.kernel import STAT_COUNT, make_integrator, new_stats
 from nonholo.sim.result import SimulationResult
@@ -28,6 +28,7 @@ STABLE_STEP_FACTOR = 0.5
 # resolve the initial transient (the cascaded law turns at ~300 rad/s for ~20 ms).
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
+MAX_SUBSTEPS = 1000
 # The reference is surveyed at this many points to size the sub-steps.
 SURVEY_POINTS = 2001
 # Above this many robot-sub-steps a run is split into chunks with a progress bar.
@@ -45,6 +46,10 @@ def _substep_plan(scenario: Scenario, stiffness: float) -> np.ndarray:
     if scenario.substeps is not None:
         return np.full(n, scenario.substeps, dtype=np.int64)
     base = max(1, math.ceil(stiffness * scenario.dt / STABLE_STEP_FACTOR))
+    if base > MAX_SUBSTEPS:
+        raise NonholoInputError(
+            f"the control law is too stiff for dt = {scenario.dt:g} s (fastest rate {stiffness:.3g} 1/s would need "
+            f"{base} sub-steps per step): reduce dt or lower the gains")
     plan = np.full(n, base, dtype=np.int64)
     if base > 1:
         startup_steps = math.ceil(STARTUP_TIME_CONSTANTS / stiffness / scenario.dt)
@@ -76,11 +81,13 @@ def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.n
     state = np.array([[*r.start, 0.0] for r in robots], dtype=float).T.copy()
     for i, robot in enumerate(robots):
         if robot.controller.controller.initial_compensator:
-            xi0 = robot.controller.xi0 if robot.controller.xi0 is not None else float(config_rows[0, REF_V])
-            if xi0 == 0.0:
-                raise InfeasibleReferenceError(
-                    f"robot {robot.name!r}: xi0 defaults to v_d(0) = 0, the singular point of dynamic feedback; "
-                    "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
+            xi0 = robot.controller.xi0
+            if xi0 is None:
+                xi0 = float(config_rows[0, REF_V])
+                if abs(xi0) < 1e-9:
+                    raise InfeasibleReferenceError(
+                        f"robot {robot.name!r}: xi0 defaults to v_d(0) = {xi0:.3g}, the singular point of dynamic feedback; "
+                        "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
             state[3, i] = xi0
     return state
 
@@ -109,7 +116,11 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
     rows_by_plan: dict[bytes, tuple] = {}
     for law, members in _group_robots(scenario).items():
         robots = [scenario.robots[i] for i in members]
-        stiffness = max(max(r.controller.stiffness(v_peak, omega_peak) for r in robots), omega_peak)
+        for robot in robots:
+            _check_reference(scenario, robot.controller, survey)
+        # Laws that use ω_d must also resolve the reference's own turning.
+        stiffness = max(max(r.controller.stiffness(v_peak, omega_peak) for r in robots),
+                        omega_peak if robots[0].controller.controller.needs_moving_reference else 0.0)
         plan = _substep_plan(scenario, stiffness) if scenario.method == "rk4" else np.ones(n_steps, dtype=np.int64)
         key = plan.tobytes()
         if key not in rows_by_plan:
@@ -118,8 +129,6 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
         rows, row_start = rows_by_plan[key]
         if grid_rows is None:
             grid_rows = rows[row_start]
-        for robot in robots:
-            _check_reference(scenario, robot.controller, rows)
         gains = np.array([r.controller.gain_vector() for r in robots]).T.copy()
         limits = np.array([[r.v_max, r.omega_max] for r in robots]).T.copy()
         state = _initial_states(scenario, robots, rows)

@@ -1,0 +1,69 @@
+"""In-process transport: asyncio queues, deterministic order, no sockets. For simulation
+and tests: broadcast visits peers in name order, so runs repeat exactly."""
+from __future__ import annotations
+
+import asyncio
+
+from nonholo.comm.transports.base import (
+    DEFAULT_MAX_FRAME, Capabilities, Transport, TransportClosed, UnknownPeer,
+)
+
+_CLOSED = object()
+
+
+class InProcNetwork:
+    """A hub of named endpoints living in one event loop."""
+
+    def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
+        self.max_frame = max_frame
+        self._endpoints: dict[str, InProcTransport] = {}
+
+    def endpoint(self, name: str) -> "InProcTransport":
+        if name in self._endpoints:
+            raise ValueError(f"endpoint {name!r} already exists")
+        endpoint = InProcTransport(self, name)
+        self._endpoints[name] = endpoint
+        return endpoint
+
+    def deliver(self, sender: str, frame: bytes, to: str | None) -> None:
+        if to is None:
+            targets = [self._endpoints[n] for n in sorted(self._endpoints) if n != sender]
+        elif to in self._endpoints:
+            targets = [self._endpoints[to]]
+        else:
+            raise UnknownPeer(f"no endpoint named {to!r}")
+        for target in targets:
+            target.queue.put_nowait((sender, frame))
+
+    def remove(self, name: str) -> None:
+        self._endpoints.pop(name, None)
+
+
+class InProcTransport(Transport):
+    def __init__(self, network: InProcNetwork, name: str) -> None:
+        self.name = name
+        self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=True,
+                                         max_frame=network.max_frame)
+        self.queue: asyncio.Queue = asyncio.Queue()
+        self._network = network
+        self._closed = False
+
+    async def send(self, frame: bytes, to: str | None = None) -> None:
+        if self._closed:
+            raise TransportClosed(f"{self.name} is closed")
+        self.check_frame(frame)
+        self._network.deliver(self.name, bytes(frame), to)
+
+    async def recv(self) -> tuple[str, bytes]:
+        if self._closed:
+            raise TransportClosed(f"{self.name} is closed")
+        item = await self.queue.get()
+        if item is _CLOSED:
+            raise TransportClosed(f"{self.name} is closed")
+        return item
+
+    async def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._network.remove(self.name)
+            self.queue.put_nowait(_CLOSED)

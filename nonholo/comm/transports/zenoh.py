@@ -1,0 +1,87 @@
+"""Zenoh transport (optional extra ``nonholo[zenoh]``).
+
+Peer mode, multicast scouting off, explicit endpoints: nothing leaves the configured
+interfaces. Key space per fleet: ``nonholo/<fleet>/all`` (broadcast, one publication
+reaches every follower) and ``nonholo/<fleet>/to/<name>`` (directed messages). The sender
+name travels as the sample attachment.
+"""
+from __future__ import annotations
+
+import asyncio
+
+import zenoh
+
+from nonholo.comm.transports.base import (
+    DEFAULT_MAX_FRAME, Capabilities, Transport, TransportClosed,
+)
+
+_CLOSED = object()
+
+
+def peer_config(listen: list[str], connect: list[str]) -> zenoh.Config:
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("listen/endpoints", _json_list(listen))
+    config.insert_json5("connect/endpoints", _json_list(connect))
+    return config
+
+
+def _json_list(items: list[str]) -> str:
+    return "[" + ",".join(f'"{item}"' for item in items) + "]"
+
+
+class ZenohTransport(Transport):
+    def __init__(self, name: str, fleet: str, config: zenoh.Config,
+                 max_frame: int = DEFAULT_MAX_FRAME) -> None:
+        self.name = name
+        self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=True,
+                                         max_frame=max_frame)
+        self._prefix = f"nonholo/{fleet}"
+        self._loop = asyncio.get_running_loop()
+        self._inbox: asyncio.Queue = asyncio.Queue()
+        self._session = zenoh.open(config)
+        self._subscribers = [
+            self._session.declare_subscriber(f"{self._prefix}/all", self._on_sample),
+            self._session.declare_subscriber(f"{self._prefix}/to/{name}", self._on_sample),
+        ]
+        # BLOCK (not the default DROP) so commands and states are never silently dropped;
+        # express skips the batching delay.
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._closed = False
+
+    def _publisher(self, key: str) -> "zenoh.Publisher":
+        if key not in self._publishers:
+            self._publishers[key] = self._session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        return self._publishers[key]
+
+    def _on_sample(self, sample: "zenoh.Sample") -> None:  # runs on a Zenoh thread
+        sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else "?"
+        if sender != self.name:
+            self._loop.call_soon_threadsafe(self._inbox.put_nowait,
+                                            (sender, sample.payload.to_bytes()))
+
+    async def send(self, frame: bytes, to: str | None = None) -> None:
+        if self._closed:
+            raise TransportClosed(f"{self.name} is closed")
+        self.check_frame(frame)
+        key = f"{self._prefix}/all" if to is None else f"{self._prefix}/to/{to}"
+        self._publisher(key).put(frame, attachment=self.name.encode("utf-8"))
+
+    async def recv(self) -> tuple[str, bytes]:
+        if self._closed:
+            raise TransportClosed(f"{self.name} is closed")
+        item = await self._inbox.get()
+        if item is _CLOSED:
+            raise TransportClosed(f"{self.name} is closed")
+        return item
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for entity in [*self._publishers.values(), *self._subscribers]:
+            entity.undeclare()
+        self._session.close()
+        self._inbox.put_nowait(_CLOSED)

@@ -1,0 +1,130 @@
+"""Each tracking law against its mathematics (spec leader.md §3)."""
+import math
+
+import numpy as np
+import pytest
+
+from nonholo import references
+from nonholo.control.registry import CONTROLLERS, controller
+from nonholo.errors import NonholoInputError
+from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim.simulator import simulate
+from tests.conftest import pose_from_errors
+
+ALL = [("approximate-linearization", None), ("nonlinear", None), ("cascaded", "linear"), ("cascaded", "sine"),
+       ("kanayama", None), ("offset-point", None), ("dynamic-feedback", None)]
+
+
+def run(reference, robots, **kw):
+    return simulate(Scenario(reference, robots, **kw), record=kw.pop("record", False) if False else False)
+
+
+@pytest.mark.parametrize("name, variant", ALL)
+def test_starting_on_the_reference_keeps_the_error_zero(name, variant):
+    ref = references.eight()
+    row = ref.table([0.0])[0]
+    robot = Robot("r", controller(name, variant), start=(row[1], row[2], row[7]))
+    result = simulate(Scenario(ref, [robot], duration=60.0, dt=0.01), record=False)
+    assert result.metrics.error_max[0] < 1e-7
+
+
+@pytest.mark.parametrize("name, variant", [("approximate-linearization", None), ("nonlinear", None),
+                                           ("dynamic-feedback", None), ("offset-point", None), ("kanayama", None)])
+def test_converges_from_perturbed_starts(name, variant):
+    """Tracking of the figure eight from several off-path starts (ω_d persistently exciting)."""
+    ref = references.eight()
+    starts = [(0.5, -0.5, 0.3), (-1.0, 0.5, -1.0), (0.3, 0.8, 2.0)]
+    robots = [Robot(f"r{i}", controller(name, variant, **({"ky": 64.0, "ktheta": 16.0} if name == "kanayama" else {})),
+                    start=s) for i, s in enumerate(starts)]
+    result = simulate(Scenario(ref, robots, duration=120.0, dt=0.01), record=False)
+    assert np.all(result.metrics.error_max > 0.3)
+    assert np.all(result.metrics.error_final < 1e-3), result.metrics.error_final
+
+
+@pytest.mark.parametrize("variant", ["linear", "sine"])
+def test_cascaded_converges_when_omega_d_excites_the_cross_track_error(variant):
+    """Spec §3.3: position errors obey λ² + c2 λ + (1 + c3) ω_d²; ω_d = 1 rad/s gives a
+    slow pole of about −0.43 1/s, so 60 s leaves e⁻²⁵ of the initial error."""
+    ref = references.circle(radius=1.0, period=2 * math.pi)
+    result = simulate(Scenario(ref, [Robot("r", controller("cascaded", variant), start=(1.5, 0.3, 1.0))],
+                               duration=60.0, dt=0.01), record=False)
+    assert result.metrics.error_final[0] < 1e-6
+
+
+def test_cascaded_cannot_remove_a_lateral_offset_on_a_straight_line():
+    """Spec §3.3: with ω_d ≡ 0 the cross-track error is not corrected."""
+    robot = Robot("r", controller("cascaded"), start=(0.7, 0.0, math.pi / 2))
+    result = simulate(Scenario(references.line(), [robot], duration=100.0, dt=0.01), record=False)
+    assert result.metrics.error_final[0] == pytest.approx(0.7, rel=1e-9)
+
+
+def test_dynamic_feedback_error_obeys_the_closed_form():
+    """Spec §3.6: with e(0) = 0, ∫|e|² dt = |ė(0)|² / (2 kp kd) and e decays as a damped oscillator."""
+    kp, kd = 1.0, 0.7
+    ref = references.line()  # p_d(0) = 0, ṗ_d = (0, 1); robot at rest heading +x with ξ(0) = 1
+    result = simulate(Scenario(ref, [Robot("r", controller("dynamic-feedback", kp=kp, kd=kd), (0, 0, 0))],
+                               duration=60.0, dt=0.001))
+    e_dot0_sq = 2.0  # ė(0) = (0, 1) − 1·(1, 0)
+    integral = result.metrics.error_rms[0] ** 2 * (result.t.size * 0.001)
+    assert integral == pytest.approx(e_dot0_sq / (2 * kp * kd), rel=2e-3)
+    # Each Cartesian error is exactly the impulse response h(t) of 1/(s² + kd s + kp) times ė_i(0).
+    wd = math.sqrt(kp - kd**2 / 4)
+    h = np.exp(-kd * result.t / 2) * np.sin(wd * result.t) / wd
+    assert np.allclose(result.x_d - result.x[0], -1.0 * h, atol=1e-8)
+    assert np.allclose(result.y_d - result.y[0], 1.0 * h, atol=1e-8)
+
+
+@pytest.mark.parametrize("v_d, omega_d", [(1.0, 0.0), (0.5, 0.05), (2.0, -0.3)])
+def test_approximate_linearization_places_the_frozen_time_poles(v_d, omega_d):
+    """Spec §3.1: eigenvalues of the linearized closed loop are −2ζa, −ζa ± a·sqrt(ζ²−1)."""
+    zeta, b = 0.5, 2.0
+    law = CONTROLLERS["approximate-linearization"].laws["default"].py_func
+    ref_row = np.array([0, 0, 0, v_d, 0, 0, 0, 0, v_d, omega_d], dtype=float)
+    gains = np.array([[zeta], [b]])
+
+    def error_rates(e):
+        x, y, th = pose_from_errors(ref_row, *e)
+        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, ref_row, gains, 0)
+        return np.array([w * e[1] - v + v_d * math.cos(e[2]), -w * e[0] + v_d * math.sin(e[2]), omega_d - w])
+
+    jac = np.column_stack([(error_rates(h) - error_rates(-h)) / 2e-7 for h in np.eye(3) * 1e-7])
+    a = math.sqrt(omega_d**2 + b * v_d**2)
+    expected = np.sort_complex(np.array([-2 * zeta * a, -zeta * a + a * np.sqrt(complex(zeta**2 - 1)),
+                                         -zeta * a - a * np.sqrt(complex(zeta**2 - 1))]))
+    assert np.allclose(np.sort_complex(np.linalg.eigvals(jac)), expected, atol=1e-6)
+
+
+def test_nonlinear_law_lyapunov_function_decreases():
+    """Spec §3.2: V = (b/2)(e1² + e2²) + e3²/2 is non-increasing along the closed loop."""
+    ref = references.circle()
+    result = simulate(Scenario(ref, [Robot("r", controller("nonlinear"), start=(9.0, 1.0, 2.0))], duration=30.0,
+                               dt=0.001))
+    b = 2.0
+    th = result.theta[0]
+    dx, dy = result.x_d - result.x[0], result.y_d - result.y[0]
+    e1, e2 = np.cos(th) * dx + np.sin(th) * dy, -np.sin(th) * dx + np.cos(th) * dy
+    e3 = np.angle(np.exp(1j * (result.theta_d - th)))
+    V = b / 2 * (e1**2 + e2**2) + e3**2 / 2
+    assert np.all(np.diff(V) <= 1e-9) and V[-1] < 1e-3 * V[0]
+
+
+def test_dynamic_feedback_singularity_is_guarded_and_reported():
+    robot = Robot("r", controller("dynamic-feedback", xi0=0.0), start=(0.0, 0.0, 0.0))
+    result = simulate(Scenario(references.line(), [robot], duration=20.0, dt=0.01))
+    assert result.metrics.singular[0] > 0 and result.metrics.first_singular[0] == 0.0
+    assert np.all(np.isfinite(result.omega)) and np.isfinite(result.metrics.error_mean[0])
+    assert result.to_dict()["robots"]["r"]["events"]["first_singular_time"] == 0.0
+
+
+def test_gain_validation_messages():
+    with pytest.raises(NonholoInputError, match="unknown controller 'pid'.*dynamic-feedback"):
+        controller("pid")
+    with pytest.raises(NonholoInputError, match=r"unknown gain 'k9' for kanayama \(gains: kx, ky, ktheta\)"):
+        controller("kanayama", k9=1.0)
+    with pytest.raises(NonholoInputError, match="zeta.*in \\(0, 1\\)"):
+        controller("nonlinear", zeta=1.5)
+    with pytest.raises(NonholoInputError, match="c3.*> -1"):
+        controller("cascaded", c3=-2.0)
+    with pytest.raises(NonholoInputError, match="conflicts"):
+        controller("dynamic-feedback", kp=1.0, kp1=2.0)
+    assert controller("dynamic-feedback", kp=2.0).gains["kp2"] == 2.0

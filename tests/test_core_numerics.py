@@ -1,0 +1,43 @@
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from nonholo.errors import ExpressionError
+from nonholo.expressions import parse_expression
+from nonholo.numerics import sinc_of, sincos, wrap_angle
+
+
+def test_sincos_matches_libm_to_a_few_ulp():
+    x = np.concatenate([np.linspace(-1e4, 1e4, 200_001), [0.0, -0.0, math.pi / 4]])
+    s, c = np.array([sincos(v) for v in x[::50]]).T
+    assert np.max(np.abs(s - np.sin(x[::50]))) < 4e-16
+    assert np.max(np.abs(c - np.cos(x[::50]))) < 4e-16
+    assert sincos.py_func(1.5e6)[0] == pytest.approx(math.sin(1.5e6), abs=1e-12)
+
+
+@pytest.mark.parametrize("angle, wrapped", [(math.pi, math.pi), (-math.pi, math.pi), (3 * math.pi / 2, -math.pi / 2),
+                                            (7.0, 7.0 - 2 * math.pi), (0.0, 0.0), (-1e-17, -1e-17)])
+def test_wrap_angle_is_in_half_open_interval(angle, wrapped):
+    assert wrap_angle(angle) == pytest.approx(wrapped, abs=1e-15)
+
+
+def test_sinc_is_continuous_at_zero():
+    for x in (0.0, 1e-9, 1e-5, 1e-4, 1e-3, 0.5, -2.0):
+        assert sinc_of(x, math.sin(x)) == pytest.approx(1.0 if x == 0 else math.sin(x) / x, rel=1e-15)
+
+
+def test_expression_parser_builds_sympy_without_eval():
+    t = sp.Symbol("t")
+    assert parse_expression("6*sin(t/15 + 0.3) + 0.2*t", {"t": t}) == 6 * sp.sin(t / 15 + sp.Float(0.3)) + sp.Float(0.2) * t
+    assert parse_expression("t^2 - 2*pi", {"t": t}) == t**2 - 2 * sp.pi
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("__import__('os').system('x')", "not allowed"), ("t.real", "not allowed"), ("q*t", "unknown name 'q'"),
+    ("foo(t)", "unknown function 'foo'"), ("sin(t", "cannot parse"), ("", "empty"), ("(" * 4000 + "t" + ")" * 4000, "cannot parse|nested"), ("t+" * 6000, "longer than"),
+], ids=["import", "attribute", "unknown-name", "unknown-function", "syntax", "empty", "deep-nesting", "too-long"])
+def test_expression_parser_rejects_unsafe_or_bad_input(text, fragment):
+    with pytest.raises(ExpressionError, match=fragment):
+        parse_expression(text, {"t": sp.Symbol("t")})

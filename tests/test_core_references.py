@@ -1,0 +1,68 @@
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from nonholo import references
+from nonholo.errors import InfeasibleReferenceError
+
+THESIS = {"eight": 80 * np.pi, "line": 500.0, "sinusoid": 1000.0, "circle": 40 * np.pi}
+
+
+@pytest.mark.parametrize("kind", THESIS)
+def test_open_loop_feedforward_reproduces_the_reference(kind):
+    """Spec §2: the unicycle driven by (v_d, ω_d) from q_d(0) follows p_d to ≤ 1e-6 m."""
+    ref = references.THESIS_TESTS[kind]()
+    assert ref.default_duration == pytest.approx(THESIS[kind])
+    row0 = ref.table([0.0])[0]
+
+    def rhs(t, q):
+        _, _, _, _, _, _, _, _, v, w = ref.table(np.array([t]))[0]
+        return [v * np.cos(q[2]), v * np.sin(q[2]), w]
+
+    grid = np.linspace(0, ref.default_duration, 2001)
+    sol = solve_ivp(rhs, (0, grid[-1]), [row0[1], row0[2], row0[7]], t_eval=grid, method="DOP853", rtol=1e-12, atol=1e-12)
+    table = ref.table(grid)
+    assert np.max(np.hypot(sol.y[0] - table[:, 1], sol.y[1] - table[:, 2])) < 1e-6
+
+
+def test_thesis_feedforward_values_at_zero():
+    """Spec §2 test values v_d(0), θ_d(0); ω_d ≡ 0 on the line, 1/20 on the circle."""
+    expected = {"eight": (0.559, 0.4636), "line": (1.0, np.pi / 2), "sinusoid": (np.sqrt(101), 1.4711),
+                "circle": (0.5, np.pi / 2)}
+    for kind, (v0, theta0) in expected.items():
+        row = references.THESIS_TESTS[kind]().table([0.0])[0]
+        assert row[8] == pytest.approx(v0, abs=5e-4) and row[7] == pytest.approx(theta0, abs=5e-5)
+    assert np.allclose(references.line().table(np.linspace(0, 500, 11))[:, 9], 0.0)
+    assert np.allclose(references.circle().table(np.linspace(0, 100, 11))[:, 9], 1 / 20)
+
+
+def test_backward_direction_flips_speed_and_heading_not_turn_rate():
+    fwd, bwd = references.circle().table([1.0])[0], references.circle(direction=-1).table([1.0])[0]
+    assert bwd[8] == pytest.approx(-fwd[8]) and bwd[9] == pytest.approx(fwd[9])
+    assert np.cos(bwd[7] - fwd[7]) == pytest.approx(-1.0)
+
+
+def test_overridden_parameters_and_expression_agree():
+    ref = references.circle(radius=3, period=20, center=(1, 2))
+    same = references.expression("1 + 3*cos(2*pi*t/20)", "2 + 3*sin(2*pi*t/20)")
+    t = np.linspace(0, 20, 7)
+    assert np.allclose(ref.table(t), same.table(t), atol=1e-12)
+
+
+def test_waypoint_spline_is_c2_and_passes_through_points():
+    points = [[0, 0, 0], [2, 1, 1], [4, 3, 0], [6, 4, 2]]
+    ref = references.waypoints(points)
+    rows = ref.table([0.0, 2.0, 4.0, 6.0])
+    assert np.allclose(rows[:, 1:3], np.array(points)[:, 1:])
+    eps = 1e-7
+    around_knot = ref.flat_outputs(np.array([2 - eps, 2 + eps]))
+    assert np.allclose(around_knot[:, 0], around_knot[:, 1], atol=1e-5)  # p, ṗ, p̈ continuous at a knot
+    with pytest.raises(ValueError, match="strictly increasing"):
+        references.waypoints([[0, 0, 0], [0, 1, 1]])
+
+
+def test_vanishing_speed_is_found_between_grid_points():
+    ref = references.expression("(t - 3.0012345)^3", "(t - 3.0012345)^2")
+    with pytest.raises(InfeasibleReferenceError, match=r"t = 3\.0012"):
+        ref.check_speed(0.0, 10.0)
+    references.eight().check_speed(0.0, 80 * np.pi)  # min speed 0.174 m/s: feasible

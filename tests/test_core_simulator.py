@@ -1,0 +1,87 @@
+import math
+
+import numpy as np
+import pytest
+
+from nonholo import references
+from nonholo.control.registry import controller
+from nonholo.errors import InfeasibleReferenceError, NonholoInputError
+from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim.simulator import simulate
+
+
+def test_rk4_agrees_with_solve_ivp():
+    robots = [Robot("dfl", controller("dynamic-feedback"), (0.5, -0.5, 0.2)),
+              Robot("nl", controller("nonlinear"), (0.5, -0.5, 0.2))]
+    fast = simulate(Scenario(references.eight(), robots, duration=40.0, dt=0.01))
+    exact = simulate(Scenario(references.eight(), robots, duration=40.0, dt=0.01, method="solve_ivp"))
+    assert np.allclose(fast.metrics.error_mean, exact.metrics.error_mean, rtol=1e-7)
+    assert np.max(np.abs(fast.x - exact.x)) < 1e-7
+
+
+def test_batch_equals_single_runs():
+    configs = [controller("kanayama", kx=3.0), controller("dynamic-feedback", kp=2.0), controller("cascaded")]
+    robots = [Robot(f"r{i}", c, (0.1 * i, -0.2, 0.1)) for i, c in enumerate(configs)]
+    batch = simulate(Scenario(references.circle(), robots, duration=30.0, dt=0.01), record=False)
+    for i, robot in enumerate(robots):
+        single = simulate(Scenario(references.circle(), [robot], duration=30.0, dt=0.01), record=False)
+        assert np.array_equal(single.stats[:, 0], batch.stats[:, i])
+
+
+def test_recording_does_not_change_statistics():
+    robots = [Robot("r", controller("approximate-linearization"), (1.0, 0.0, 0.0))]
+    sc = Scenario(references.eight(), robots, duration=30.0, dt=0.01)
+    a, b = simulate(sc, record=True), simulate(sc, record=False)
+    assert np.array_equal(a.stats, b.stats)
+    e = a.error_norm()[0]
+    assert a.metrics.error_mean[0] == pytest.approx(e.mean(), rel=1e-12)
+    assert a.metrics.error_std[0] == pytest.approx(e.std(), rel=1e-9)
+    assert a.metrics.error_max[0] == e.max() and a.metrics.error_final[0] == e[-1]
+
+
+def test_grid_is_uniform_with_round_duration_over_dt():
+    sc = Scenario(references.eight(), [Robot("r")], duration=1.004, dt=0.01)
+    result = simulate(sc)
+    assert sc.n_steps == 100 and result.t.size == 101 and result.t[-1] == pytest.approx(1.0)
+
+
+def test_saturation_limits_and_counts():
+    robot = Robot("r", controller("kanayama"), (0.0, 0.0, 0.0), v_max=1.0, omega_max=0.5)
+    result = simulate(Scenario(references.circle(), [robot], duration=30.0, dt=0.01))
+    assert result.metrics.peak_v[0] <= 1.0 and result.metrics.peak_omega[0] <= 0.5
+    assert result.metrics.saturated_v[0] > 0
+
+
+def test_sampled_data_control_holds_the_command():
+    robot = Robot("r", controller("dynamic-feedback"), (0.3, -0.3, 0.0))
+    held = simulate(Scenario(references.eight(), [robot], duration=60.0, dt=0.01, control_period=0.1))
+    v = held.v[0]
+    assert np.all(v[1:10] == v[0]) and v[10] != v[0]
+    continuous = simulate(Scenario(references.eight(), [robot], duration=60.0, dt=0.01))
+    assert held.metrics.error_final[0] < 5e-3 and held.metrics.error_mean[0] != continuous.metrics.error_mean[0]
+    with pytest.raises(NonholoInputError, match="multiple of dt"):
+        Scenario(references.eight(), [robot], dt=0.01, control_period=0.015)
+
+
+def test_stiff_cascaded_law_is_substepped():
+    result = simulate(Scenario(references.sinusoid(), [Robot("r", controller("cascaded"))], duration=5.0, dt=0.01))
+    assert result.substeps[0] >= 5 and math.isfinite(result.metrics.error_mean[0])
+
+
+def test_reference_with_vanishing_speed_is_rejected_for_laws_that_need_v_d():
+    ref = references.waypoints([[0, 0, 0], [5, 2, 1], [10, 4, 0]], boundary="clamped")
+    with pytest.raises(InfeasibleReferenceError, match=r"vanishes at t = 0 s.*kanayama"):
+        simulate(Scenario(ref, [Robot("r", controller("kanayama"))], dt=0.01))
+    with pytest.raises(InfeasibleReferenceError, match="xi0 defaults to v_d"):
+        simulate(Scenario(ref, [Robot("r", controller("dynamic-feedback"))], dt=0.01))
+    ok = simulate(Scenario(ref, [Robot("r", controller("dynamic-feedback", xi0=0.01))], dt=0.01))
+    assert ok.metrics.error_final[0] < 0.05
+
+
+def test_scenario_validation():
+    with pytest.raises(NonholoInputError, match="unique"):
+        Scenario(references.eight(), [Robot("a"), Robot("a")])
+    with pytest.raises(NonholoInputError, match="duration"):
+        Scenario(references.expression("t", "0"), [Robot("a")])
+    with pytest.raises(NonholoInputError, match="dt must be a positive"):
+        Scenario(references.eight(), [Robot("a")], dt=-1.0)
