@@ -15,10 +15,6 @@ ALL = [("approximate-linearization", None), ("nonlinear", None), ("cascaded", "l
        ("kanayama", None), ("offset-point", None), ("dynamic-feedback", None)]
 
 
-def run(reference, robots, **kw):
-    return simulate(Scenario(reference, robots, **kw), record=kw.pop("record", False) if False else False)
-
-
 @pytest.mark.parametrize("name, variant", ALL)
 def test_starting_on_the_reference_keeps_the_error_zero(name, variant):
     ref = references.eight()
@@ -80,11 +76,11 @@ def test_approximate_linearization_places_the_frozen_time_poles(v_d, omega_d):
     zeta, b = 0.5, 2.0
     law = CONTROLLERS["approximate-linearization"].laws["default"].py_func
     ref_row = np.array([0, 0, 0, v_d, 0, 0, 0, 0, v_d, omega_d], dtype=float)
-    gains = np.array([[zeta], [b]])
+    gains = (zeta, b)
 
     def error_rates(e):
         x, y, th = pose_from_errors(ref_row, *e)
-        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, ref_row, gains, 0)
+        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, tuple(ref_row), gains)
         return np.array([w * e[1] - v + v_d * math.cos(e[2]), -w * e[0] + v_d * math.sin(e[2]), omega_d - w])
 
     jac = np.column_stack([(error_rates(h) - error_rates(-h)) / 2e-7 for h in np.eye(3) * 1e-7])

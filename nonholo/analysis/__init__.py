@@ -15,7 +15,8 @@ from .builtin import BUILTIN_SYSTEMS, car, separation_bearing, separation_separa
 from .chained import check_chained_form, check_flatness, chained_form_rates
 from .distributions import (accessibility_filtration, generic_rank, is_involutive,
                             nilpotency_step, rank_loss_conditions)
-from .expressions import ExpressionError, parse_expression
+from nonholo.errors import ExpressionError
+from nonholo.expressions import parse_expression
 from .lie import bracket_tree, lie_bracket, lie_derivative, repeated_lie_derivatives
 from .linear import (body_frame_model, body_frame_rotation, controllability_matrix,
                      linearize, linearize_along_reference, linearize_at_point,

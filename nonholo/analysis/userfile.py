@@ -20,7 +20,8 @@ from pathlib import Path
 
 import sympy as sp
 
-from .expressions import RESERVED_NAMES, ExpressionError, parse_expression
+from nonholo.errors import ExpressionError
+from nonholo.expressions import RESERVED_NAMES, parse_expression
 from .system import ControlSystem
 
 _KNOWN_KEYS = frozenset({"name", "description", "states", "inputs", "fields", "drift",

@@ -24,16 +24,16 @@ def _driving_speed(c2, c3, e1, e2, v_d, omega_d):
 
 
 @njit(inline="always", error_model="numpy")
-def cascaded_linear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
-    c1, c2, c3 = gains[0, i], gains[1, i], gains[2, i]
+def cascaded_linear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    c1, c2, c3 = gains[0], gains[1], gains[2]
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     return _driving_speed(c2, c3, e1, e2, v_d, omega_d), omega_d + c1 * e3, 0.0, 0.0
 
 
 @njit(inline="always", error_model="numpy")
-def cascaded_sine_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
-    c1, c2, c3 = gains[0, i], gains[1, i], gains[2, i]
+def cascaded_sine_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    c1, c2, c3 = gains[0], gains[1], gains[2]
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     sin_e3, _ = sincos(e3)

@@ -35,8 +35,8 @@ from nonholo.references.feedforward import (REF_DDX, REF_DDY, REF_DX, REF_DY, RE
 
 
 @njit(inline="always", error_model="numpy")
-def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
-    d, k1, k2 = gains[0, i], gains[1, i], gains[2, i]
+def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    d, k1, k2 = gains[0], gains[1], gains[2]
     sin_d, cos_d = sincos(ref[REF_THETA])
     turn = d * ref[REF_OMEGA]
     r1 = ref[REF_DX] - turn * sin_d + k1 * (ref[REF_X] + d * cos_d - (x + d * cos_theta))
@@ -45,8 +45,8 @@ def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
 
 
 @njit(inline="always", error_model="numpy")
-def dynamic_feedback_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
-    kp1, kp2, kd1, kd2, xi_min = gains[0, i], gains[1, i], gains[2, i], gains[3, i], gains[4, i]
+def dynamic_feedback_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    kp1, kp2, kd1, kd2, xi_min = gains[0], gains[1], gains[2], gains[3], gains[4]
     r1 = ref[REF_DDX] + kp1 * (ref[REF_X] - x) + kd1 * (ref[REF_DX] - xi * cos_theta)
     r2 = ref[REF_DDY] + kp2 * (ref[REF_Y] - y) + kd2 * (ref[REF_DY] - xi * sin_theta)
     singular = abs(xi) < xi_min

@@ -18,8 +18,8 @@ from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 
 @njit(inline="always", error_model="numpy")
-def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
-    kx, ky, ktheta = gains[0, i], gains[1, i], gains[2, i]
+def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    kx, ky, ktheta = gains[0], gains[1], gains[2]
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     sin_e3, cos_e3 = sincos(e3)

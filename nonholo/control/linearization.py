@@ -8,10 +8,12 @@ which places the frozen-time poles of the linearized error dynamics at −2ζa a
 −ζa ± a·sqrt(ζ² − 1).
 
 Every law in this package has the signature
-``law(x, y, θ, cos θ, sin θ, ξ, ref, gains, i) -> (v, ω, ξ̇, singular)``: one robot ``i``
-whose gains are column ``i`` of the gains array, ``ref`` the reference row
-(``references.feedforward.REF_COLUMNS``), ``ξ`` the dynamic compensator state (unused by
-static laws, which return ξ̇ = 0) and ``singular`` 1.0 where a singularity guard acted.
+``law(x, y, θ, cos θ, sin θ, ξ, ref, gains) -> (v, ω, ξ̇, singular)`` for one robot:
+``ref`` the reference row (a tuple indexed by ``references.feedforward.REF_COLUMNS``),
+``gains`` its gain tuple (in the controller's gain order), ``ξ`` the dynamic
+compensator state (unused by static laws, which return ξ̇ = 0) and ``singular`` 1.0
+where a singularity guard acted. Arguments are scalars and tuples only, so the
+simulator's loop over robots stays free of reference counting and vectorizes.
 """
 from __future__ import annotations
 
@@ -31,9 +33,9 @@ def _scheduled_gain(zeta, b, v_d, omega_d):
 
 
 @njit(inline="always", error_model="numpy")
-def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
+def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """v = v_d cos e3 + k1 e1,  ω = ω_d + b v_d e2 + k3 e3  (k2 sign(v_d) = b v_d)."""
-    zeta, b = gains[0, i], gains[1, i]
+    zeta, b = gains[0], gains[1]
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     k = _scheduled_gain(zeta, b, v_d, omega_d)
@@ -42,12 +44,12 @@ def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, ga
 
 
 @njit(inline="always", error_model="numpy")
-def nonlinear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains, i):
+def nonlinear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """v = v_d cos e3 + k1 e1,  ω = ω_d + k4 v_d (sin e3 / e3) e2 + k3 e3,  k4 = b.
 
     Lyapunov V = (k4/2)(e1² + e2²) + e3²/2, V̇ = −k1 k4 e1² − k3 e3² (erratum 10).
     """
-    zeta, b = gains[0, i], gains[1, i]
+    zeta, b = gains[0], gains[1]
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     k = _scheduled_gain(zeta, b, v_d, omega_d)

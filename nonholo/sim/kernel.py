@@ -3,17 +3,20 @@
 Data layout (structure of arrays, robots innermost so that loops vectorize):
 
 * ``state``  (4, n): x, y, θ, ξ (ξ = dynamic compensator; constant for static laws)
-* ``gains``  (g, n): the law's gain vector per robot
+* ``gains``  (MAX_GAINS, n): the law's gain vector per robot (unused rows zero)
 * ``limits`` (2, n): |v| ≤ v_max, |ω| ≤ ω_max (inf = no limit)
 * ``rows``   (r, 10): the reference evaluated at every stage time (``REF_COLUMNS``);
   output step k with m_k sub-steps owns rows ``row_start[k] … row_start[k] + 2 m_k``
   (times t_k + j h/2, h = dt/m_k), the last one shared with step k + 1
 * ``stats``  (STAT_COUNT, n): running statistics sampled at t_k = k·dt (Welford mean)
 * ``record`` (6, N + 1, n) or (6, 0, n): x, y, θ, ξ, v, ω on the output grid
-* ``held``   (3, n): v, ω, ξ̇ held between control instants (sampled-data mode)
+* ``held``   (6, n): v, ω, ξ̇ and their flags held between control instants
 
 Each RK4 sub-step is one loop over robots that keeps the four stages in registers, so
-memory is touched once per robot and step and the loop compiles to SIMD code. The kernel
+memory is touched once per robot and step. Inside the loops over robots only inline
+functions of scalars and tuples are called: an inlined function that receives an array
+reference-counts it on every iteration, which costs atomics and stops vectorization. The
+statistics are sampled by a loop of their own at each output time. The kernel
 mutates ``state``, ``stats``, ``record`` and ``held`` and can be resumed
 (``k_start``/``k_stop``), so callers can show progress. One kernel is compiled per law
 (``make_integrator``) and cached on disk by numba.
@@ -34,14 +37,15 @@ from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
 # disjoint; past its default of 8 run-time overlap checks it refuses to vectorize
 # ("too many memory checks needed"). These limits only allow more such checks (a few
 # comparisons per loop, not per robot); the options are process-wide.
-llvmlite.binding.set_option("nonholo", "-runtime-memory-check-threshold=64")
-llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=256")
+llvmlite.binding.set_option("nonholo", "-runtime-memory-check-threshold=256")
+llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, W_PEAK, V_SQ, W_SQ,
  SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR) = range(17)
 STAT_COUNT = 17
 REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA = range(6)
-HELD_V, HELD_OMEGA, HELD_XI_DOT = range(3)
+HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
+MAX_GAINS = 5
 
 _OPTIONS = dict(cache=True, error_model="numpy")
 
@@ -53,48 +57,8 @@ def new_stats(n: int) -> np.ndarray:
 
 
 @njit(inline="always", **_OPTIONS)
-def sample_robot(stats, k, i, state_i, command, ref):
-    """Add robot i's sample at output step k (time ref[0]) to its running statistics.
-
-    ``state_i`` = (x, y, θ, ξ); ``command`` = (v, ω, singular, v saturated, ω saturated).
-    """
-    x, y, theta, xi = state_i
-    v, omega, singular, saturated_v, saturated_omega = command
-    ex = ref[REF_X] - x
-    ey = ref[REF_Y] - y
-    e = math.sqrt(ex * ex + ey * ey)
-    delta = e - stats[E_MEAN, i]
-    mean = stats[E_MEAN, i] + delta / (k + 1.0)
-    stats[E_MEAN, i] = mean
-    stats[E_M2, i] += delta * (e - mean)
-    stats[E_SQ, i] += e * e
-    stats[E_MAX, i] = max(stats[E_MAX, i], e)
-    stats[E_FINAL, i] = e
-    heading = abs(wrap_angle(ref[REF_THETA] - theta))
-    stats[H_SUM, i] += heading
-    stats[H_SQ, i] += heading * heading
-    stats[H_MAX, i] = max(stats[H_MAX, i], heading)
-    stats[H_FINAL, i] = heading
-    stats[V_PEAK, i] = max(stats[V_PEAK, i], abs(v))
-    stats[W_PEAK, i] = max(stats[W_PEAK, i], abs(omega))
-    stats[V_SQ, i] += v * v
-    stats[W_SQ, i] += omega * omega
-    stats[SAT_V, i] += saturated_v
-    stats[SAT_W, i] += saturated_omega
-    stats[SINGULAR, i] += singular
-    stats[FIRST_SINGULAR, i] = min(stats[FIRST_SINGULAR, i], ref[0] if singular > 0.0 else np.inf)
-
-
-@njit(inline="always", **_OPTIONS)
-def record_robot(record, k, i, state_i, command):
-    """Store robot i's state and command at output step k in the trajectory record."""
-    x, y, theta, xi = state_i
-    record[REC_X, k, i] = x
-    record[REC_Y, k, i] = y
-    record[REC_THETA, k, i] = theta
-    record[REC_XI, k, i] = xi
-    record[REC_V, k, i] = command[0]
-    record[REC_OMEGA, k, i] = command[1]
+def gains_of(gains, i):
+    return gains[0, i], gains[1, i], gains[2, i], gains[3, i], gains[4, i]
 
 
 @njit(inline="always", **_OPTIONS)
@@ -105,92 +69,109 @@ def row_values(rows, r):
 
 
 @njit(inline="always", **_OPTIONS)
-def command_at(law, x, y, theta, xi, ref, gains, limits, i):
+def command_at(law, x, y, theta, xi, ref, gains_i, v_max, omega_max):
     """Saturated law output and its flags at one state: (v, ω, ξ̇, singular,
     v saturated, ω saturated, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
-    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains, i)
-    v = min(max(v_raw, -limits[0, i]), limits[0, i])
-    omega = min(max(omega_raw, -limits[1, i]), limits[1, i])
+    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains_i)
+    v = min(max(v_raw, -v_max), v_max)
+    omega = min(max(omega_raw, -omega_max), omega_max)
     return (v, omega, xi_dot, singular, 1.0 if v != v_raw else 0.0, 1.0 if omega != omega_raw else 0.0,
             cos_t, sin_t)
 
 
 @njit(inline="always", **_OPTIONS)
-def sample(recording, stats, record, k, i, state_i, command, ref):
-    sample_robot(stats, k, i, state_i, command, ref)
-    if recording:
-        record_robot(record, k, i, state_i, command)
-
-
-@njit(inline="always", **_OPTIONS)
-def held_command(held, i):
-    """The held command as sampled: its flags were counted at its control instant."""
-    return held[HELD_V, i], held[HELD_OMEGA, i], 0.0, 0.0, 0.0
-
-
-@njit(inline="always", **_OPTIONS)
-def substep(law, recording, sampled_data, at_sample, state, rows, row, h, gains, limits, held, stats, record, k):
-    """One RK4 sub-step of every robot; ``at_sample`` adds the statistics at its start.
-
-    The four stages are a constant-trip loop that LLVM unrolls into registers.
-    """
-    r0, r1, r2 = row_values(rows, row), row_values(rows, row + 1), row_values(rows, row + 2)
+def refresh_held(law, state, ref, gains, limits, held):
+    """Sampled-data control instant: evaluate the law once and hold its output."""
     for i in range(state.shape[1]):
-        x0, y0, theta0, xi0 = state[0, i], state[1, i], state[2, i], state[3, i]
-        x, y, theta, xi = x0, y0, theta0, xi0
-        sum_x = sum_y = sum_theta = sum_xi = 0.0
-        for stage in range(4):
-            ref = r0 if stage == 0 else (r1 if stage < 3 else r2)
-            if sampled_data:
-                sin_t, cos_t = sincos(theta)
-                v, omega, xi_dot = held[HELD_V, i], held[HELD_OMEGA, i], held[HELD_XI_DOT, i]
-                command = held_command(held, i)
-            else:
-                v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t = command_at(
-                    law, x, y, theta, xi, ref, gains, limits, i)
-                command = (v, omega, singular, sat_v, sat_w)
-            if at_sample and stage == 0:
-                sample(recording, stats, record, k, i, (x, y, theta, xi), command, ref)
-            dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
-            weight = 1.0 if stage == 0 or stage == 3 else 2.0
-            sum_x += weight * dx
-            sum_y += weight * dy
-            sum_theta += weight * dtheta
-            sum_xi += weight * xi_dot
-            step = 0.5 * h if stage < 2 else h
-            x, y, theta, xi = x0 + step * dx, y0 + step * dy, theta0 + step * dtheta, xi0 + step * xi_dot
-        sixth = h / 6.0
-        state[0, i] = x0 + sixth * sum_x
-        state[1, i] = y0 + sixth * sum_y
-        state[2, i] = theta0 + sixth * sum_theta
-        state[3, i] = xi0 + sixth * sum_xi
-
-
-@njit(inline="always", **_OPTIONS)
-def sample_all(law, recording, sampled_data, state, ref, gains, limits, held, stats, record, k):
-    """Sample every robot at output step k. Under sampled-data control the held command is
-    what acts, except at control instants, where the caller refreshed it first."""
-    for i in range(state.shape[1]):
-        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
-        if sampled_data:
-            command = held_command(held, i)
-        else:
-            v, omega, _, singular, sat_v, sat_w, _, _ = command_at(law, x, y, theta, xi, ref, gains, limits, i)
-            command = (v, omega, singular, sat_v, sat_w)
-        sample(recording, stats, record, k, i, (x, y, theta, xi), command, ref)
-
-
-@njit(inline="always", **_OPTIONS)
-def update_held(law, recording, state, ref, gains, limits, held, stats, record, k):
-    """Sampled-data control instant: evaluate the law once, hold its output, sample."""
-    for i in range(state.shape[1]):
-        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
-        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = command_at(law, x, y, theta, xi, ref, gains, limits, i)
+        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = command_at(
+            law, state[0, i], state[1, i], state[2, i], state[3, i], ref, gains_of(gains, i), limits[0, i],
+            limits[1, i])
         held[HELD_V, i] = v
         held[HELD_OMEGA, i] = omega
         held[HELD_XI_DOT, i] = xi_dot
-        sample(recording, stats, record, k, i, (x, y, theta, xi), (v, omega, singular, sat_v, sat_w), ref)
+        held[HELD_SINGULAR, i] = singular
+        held[HELD_SAT_V, i] = sat_v
+        held[HELD_SAT_OMEGA, i] = sat_w
+
+
+@njit(inline="always", **_OPTIONS)
+def sample_step(law, recording, sampled_data, state, ref, gains, limits, held, stats, record, k):
+    """Add every robot's sample at output step k (time ref[0]) to its statistics: the
+    position-error norm (Welford mean), heading error, commands in force and events."""
+    for i in range(state.shape[1]):
+        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
+        if sampled_data:
+            v, omega = held[HELD_V, i], held[HELD_OMEGA, i]
+            singular, sat_v, sat_w = held[HELD_SINGULAR, i], held[HELD_SAT_V, i], held[HELD_SAT_OMEGA, i]
+        else:
+            v, omega, _, singular, sat_v, sat_w, _, _ = command_at(
+                law, x, y, theta, xi, ref, gains_of(gains, i), limits[0, i], limits[1, i])
+        ex = ref[REF_X] - x
+        ey = ref[REF_Y] - y
+        e = math.sqrt(ex * ex + ey * ey)
+        delta = e - stats[E_MEAN, i]
+        mean = stats[E_MEAN, i] + delta / (k + 1.0)
+        stats[E_MEAN, i] = mean
+        stats[E_M2, i] += delta * (e - mean)
+        stats[E_SQ, i] += e * e
+        stats[E_MAX, i] = max(stats[E_MAX, i], e)
+        stats[E_FINAL, i] = e
+        heading = abs(wrap_angle(ref[REF_THETA] - theta))
+        stats[H_SUM, i] += heading
+        stats[H_SQ, i] += heading * heading
+        stats[H_MAX, i] = max(stats[H_MAX, i], heading)
+        stats[H_FINAL, i] = heading
+        stats[V_PEAK, i] = max(stats[V_PEAK, i], abs(v))
+        stats[W_PEAK, i] = max(stats[W_PEAK, i], abs(omega))
+        stats[V_SQ, i] += v * v
+        stats[W_SQ, i] += omega * omega
+        stats[SAT_V, i] += sat_v
+        stats[SAT_W, i] += sat_w
+        stats[SINGULAR, i] += singular
+        stats[FIRST_SINGULAR, i] = min(stats[FIRST_SINGULAR, i], ref[0] if singular > 0.0 else np.inf)
+        if recording:
+            record[REC_X, k, i] = x
+            record[REC_Y, k, i] = y
+            record[REC_THETA, k, i] = theta
+            record[REC_XI, k, i] = xi
+            record[REC_V, k, i] = v
+            record[REC_OMEGA, k, i] = omega
+
+
+@njit(inline="always", **_OPTIONS)
+def stage_rates(law, sampled_data, x, y, theta, xi, ref, gains_i, v_max, omega_max, held_command):
+    """(ẋ, ẏ, θ̇, ξ̇) at one RK4 stage: the law's command, or the held one."""
+    if sampled_data:
+        sin_t, cos_t = sincos(theta)
+        v, omega, xi_dot = held_command
+    else:
+        v, omega, xi_dot, _, _, _, cos_t, sin_t = command_at(law, x, y, theta, xi, ref, gains_i, v_max, omega_max)
+    dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
+    return dx, dy, dtheta, xi_dot
+
+
+@njit(inline="always", **_OPTIONS)
+def substep(law, sampled_data, state, rows, row, h, gains, limits, held):
+    """One classical RK4 sub-step of every robot, the four stages in registers."""
+    r0, r1, r2 = row_values(rows, row), row_values(rows, row + 1), row_values(rows, row + 2)
+    half = 0.5 * h
+    for i in range(state.shape[1]):
+        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
+        gains_i, v_max, omega_max = gains_of(gains, i), limits[0, i], limits[1, i]
+        held_command = (held[HELD_V, i], held[HELD_OMEGA, i], held[HELD_XI_DOT, i])
+        a1, b1, c1, d1 = stage_rates(law, sampled_data, x, y, theta, xi, r0, gains_i, v_max, omega_max, held_command)
+        a2, b2, c2, d2 = stage_rates(law, sampled_data, x + half * a1, y + half * b1, theta + half * c1,
+                                     xi + half * d1, r1, gains_i, v_max, omega_max, held_command)
+        a3, b3, c3, d3 = stage_rates(law, sampled_data, x + half * a2, y + half * b2, theta + half * c2,
+                                     xi + half * d2, r1, gains_i, v_max, omega_max, held_command)
+        a4, b4, c4, d4 = stage_rates(law, sampled_data, x + h * a3, y + h * b3, theta + h * c3, xi + h * d3, r2,
+                                     gains_i, v_max, omega_max, held_command)
+        sixth = h / 6.0
+        state[0, i] = x + sixth * (a1 + 2.0 * (a2 + a3) + a4)
+        state[1, i] = y + sixth * (b1 + 2.0 * (b2 + b3) + b4)
+        state[2, i] = theta + sixth * (c1 + 2.0 * (c2 + c3) + c4)
+        state[3, i] = xi + sixth * (d1 + 2.0 * (d2 + d3) + d4)
 
 
 def _stable_identity(law) -> None:
@@ -203,8 +184,8 @@ def _stable_identity(law) -> None:
 
 def make_integrator(law, recording: bool):
     """Compile (once, cached on disk) the functions that simulate robots under ``law``,
-    keeping trajectories in ``record`` if ``recording`` (a compile-time choice: the
-    conditional stores would get in the way of the loop over robots).
+    keeping trajectories in ``record`` if ``recording`` (a compile-time choice, so that
+    the statistics-only variant has no conditional stores).
 
     Returns ``(law_rates, integrate, score)``:
 
@@ -223,36 +204,32 @@ def make_integrator(law, recording: bool):
     def integrate(state, gains, limits, rows, row_start, substeps, dt, hold_every, k_start, k_stop, n_steps,
                   stats, record, held):
         sampled_data = hold_every != 0
-        for k in range(k_start, k_stop):
-            m = substeps[k]
-            h = dt / m
+        for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
-            refresh = sampled_data and k % hold_every == 0
-            if refresh:
-                update_held(law, recording, state, row_values(rows, row), gains, limits, held, stats, record, k)
+            if sampled_data and k % hold_every == 0:
+                refresh_held(law, state, row_values(rows, row), gains, limits, held)
+            sample_step(law, recording, sampled_data, state, row_values(rows, row), gains, limits, held, stats,
+                        record, k)
+            if k == n_steps:
+                break
+            m = substeps[k]
             for j in range(m):
-                substep(law, recording, sampled_data, j == 0 and not refresh, state, rows, row + 2 * j, h, gains,
-                        limits, held, stats, record, k)
-        if k_stop == n_steps:
-            last = row_values(rows, row_start[n_steps])
-            if sampled_data and n_steps % hold_every == 0:
-                update_held(law, recording, state, last, gains, limits, held, stats, record, n_steps)
-            else:
-                sample_all(law, recording, sampled_data, state, last, gains, limits, held, stats, record, n_steps)
+                substep(law, sampled_data, state, rows, row + 2 * j, dt / m, gains, limits, held)
 
     @njit(**_OPTIONS)
     def law_rates(state, rows, gains, limits, rates):
         ref = row_values(rows, 0)
         for i in range(state.shape[1]):
             v, omega, xi_dot, _, _, _, cos_t, sin_t = command_at(
-                law, state[0, i], state[1, i], state[2, i], state[3, i], ref, gains, limits, i)
+                law, state[0, i], state[1, i], state[2, i], state[3, i], ref, gains_of(gains, i), limits[0, i],
+                limits[1, i])
             rates[0, i], rates[1, i], rates[2, i] = unicycle_rates(v, omega, cos_t, sin_t)
             rates[3, i] = xi_dot
 
     @njit(**_OPTIONS)
     def score(states, rows, gains, limits, stats, record):
-        held = np.zeros((3, states.shape[2]))
+        held = np.zeros((6, states.shape[2]))
         for k in range(states.shape[0]):
-            sample_all(law, recording, False, states[k], row_values(rows, k), gains, limits, held, stats, record, k)
+            sample_step(law, recording, False, states[k], row_values(rows, k), gains, limits, held, stats, record, k)
 
     return law_rates, integrate, score

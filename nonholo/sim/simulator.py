@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 from nonholo.control.registry import ControllerConfig
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.references.feedforward import REF_OMEGA, REF_V
-from nonholo.sim.kernel import STAT_COUNT, make_integrator, new_stats
+from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats
 from nonholo.sim.result import SimulationResult
 from nonholo.sim.scenario import Scenario
 
@@ -129,7 +129,10 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
         rows, row_start = rows_by_plan[key]
         if grid_rows is None:
             grid_rows = rows[row_start]
-        gains = np.array([r.controller.gain_vector() for r in robots]).T.copy()
+        gains = np.zeros((MAX_GAINS, len(robots)))
+        for i, robot in enumerate(robots):
+            vector = robot.controller.gain_vector()
+            gains[:vector.size, i] = vector
         limits = np.array([[r.v_max, r.omega_max] for r in robots]).T.copy()
         state = _initial_states(scenario, robots, rows)
         group_stats = new_stats(len(robots))
@@ -150,11 +153,11 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
 
 
 def _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, stats, record, progress):
-    n_steps = scenario.n_steps
-    held = np.zeros((3, state.shape[1]))
-    work = float(plan.sum()) * state.shape[1]
+    """Integrate all robots of a group; in time chunks with a progress bar on long runs."""
+    n_steps, n_robots = scenario.n_steps, state.shape[1]
+    held = np.zeros((6, n_robots))
     if progress is None:
-        progress = work > PROGRESS_WORK and sys.stderr.isatty()
+        progress = float(plan.sum()) * n_robots > PROGRESS_WORK and sys.stderr.isatty()
     if not progress:
         integrate(state, gains, limits, rows, row_start, plan, scenario.dt, scenario.hold_every, 0, n_steps, n_steps,
                   stats, record, held)
@@ -162,7 +165,7 @@ def _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, s
     from tqdm import tqdm
 
     chunks = np.linspace(0, n_steps, 51).astype(np.int64)
-    with tqdm(total=n_steps, unit="step", desc=f"{scenario.name}: {state.shape[1]} robots", file=sys.stderr) as bar:
+    with tqdm(total=n_steps, unit="step", desc=f"{scenario.name}: {n_robots} robots", file=sys.stderr) as bar:
         for k_start, k_stop in zip(chunks[:-1], chunks[1:]):
             integrate(state, gains, limits, rows, row_start, plan, scenario.dt, scenario.hold_every, int(k_start),
                       int(k_stop), n_steps, stats, record, held)

@@ -1,0 +1,94 @@
+import json
+import subprocess
+import sys
+
+import pytest
+
+from nonholo.cli import main
+
+
+def run_cli(*args):
+    proc = subprocess.run([sys.executable, "-m", "nonholo", *args], capture_output=True, text=True, timeout=300)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def write(tmp_path, text, name="s.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+GOOD = """
+[simulation]
+duration = 20.0
+dt = 0.01
+[reference]
+kind = "expression"
+x = "6*sin(t/15 + 0.3) + 0.2*t"
+y = "4*sin(t/10)"
+[[robots]]
+name = "leader"
+start = [0.0, 0.5, 0.0]
+controller = "dynamic-feedback"
+gains = { kp = 1.0, kd = 0.7 }
+"""
+
+
+def test_run_json_prints_exactly_one_object(tmp_path, capsys):
+    assert main(["run", write(tmp_path, GOOD), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    error = data["robots"]["leader"]["error"]
+    assert set(error) == {"mean", "std", "var", "rms", "max", "final"}
+    assert error["var"] == pytest.approx(error["std"] ** 2)
+
+
+def test_run_writes_plot_and_output_folder(tmp_path, capsys):
+    plot = tmp_path / "fig.png"
+    assert main(["run", write(tmp_path, GOOD), "--plot", str(plot), "--out", str(tmp_path / "out")]) == 0
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 20_000
+    out = tmp_path / "out"
+    assert json.loads((out / "result.json").read_text())["robots"]["leader"]["controller"] == "dynamic-feedback"
+    header = (out / "trajectories.csv").read_text().splitlines()[0]
+    assert header.startswith("t,leader.x,leader.y,leader.theta")
+    assert "leader" in capsys.readouterr().out
+
+
+def test_bundled_example_runs_by_name(capsys):
+    assert main(["run", "expression", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["robots"]["leader"]["events"]["saturated_v_samples"] > 0
+
+
+BAD = [
+    (GOOD.replace('controller = "dynamic-feedback"', 'controller = "pid"'),
+     "robots[0].controller: unknown value 'pid' (valid: approximate-linearization, nonlinear"),
+    (GOOD.replace("kp = 1.0", "kq = 1.0"),
+     "robots[0].gains.kq: unknown gain for dynamic-feedback (gains: kp1, kp2, kd1, kd2, xi_min, kp, kd, xi0)"),
+    (GOOD.replace("dt = 0.01", "dt = 0"), "simulation.dt: expected a positive number, got 0"),
+    (GOOD.replace("dt = 0.01", 'dt = "fast"'), "simulation.dt: expected a finite number, got str 'fast'"),
+    (GOOD.replace("start = [0.0, 0.5, 0.0]", "start = [0.0, 0.5]"), "robots[0].start: expected a list of 3 finite numbers"),
+    (GOOD.replace('x = "6*sin(t/15 + 0.3) + 0.2*t"', 'x = "__import__(1)"'), "reference: unknown function '__import__'"),
+    (GOOD.replace('kind = "expression"', 'kind = "spiral"'), "reference.kind: unknown value 'spiral'"),
+    (GOOD.replace("kp = 1.0", "kp = -1.0"), "robots[0].gains: gain 'kp1' of dynamic-feedback must be > 0, got -1"),
+    (GOOD.replace("[simulation]", "[simulation]\nspeed = 3"), "simulation.speed: unknown field"),
+    (GOOD + "\n[[robots]]\nname = \"leader\"\n", "robot names must be unique"),
+    ("[reference\n", "not valid TOML"),
+    (GOOD.replace('controller = "dynamic-feedback"', 'controller = "kanayama"').replace("gains = { kp = 1.0, kd = 0.7 }", "")
+         .replace('x = "6*sin(t/15 + 0.3) + 0.2*t"', 'x = "(t-3)^3"').replace('y = "4*sin(t/10)"', 'y = "(t-3)^2"'),
+     "vanishes at t = 3 s"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD, ids=[f"bad{i}" for i in range(len(BAD))])
+def test_bad_scenarios_get_one_line_errors_and_exit_2(tmp_path, capsys, text, message):
+    path = write(tmp_path, text)
+    assert main(["run", path]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and path in err or message in err
+    assert "Traceback" not in err
+
+
+def test_missing_file_and_help():
+    code, _, err = run_cli("run", "no-such-file.toml")
+    assert code == 2 and "no-such-file.toml: cannot read" in err and "Traceback" not in err
+    code, out, _ = run_cli("run", "--help")
+    assert code == 0 and "test1-eight" in out
