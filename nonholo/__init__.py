@@ -1,2 +1,23 @@
-"""nonholo: collaborative nonholonomic robots."""
+"""nonholo: collaborative nonholonomic robots.
+
+>>> import nonholo as nh
+>>> scenario = nh.Scenario(nh.references.eight(), [nh.Robot("leader", nh.controller("dynamic-feedback"))])
+>>> result = nh.simulate(scenario)
+>>> print(f"{result.metrics.error_mean[0]:.5f} m")
+0.00194 m
+"""
 __version__ = "0.1.0"
+
+from nonholo import references  # noqa: E402
+from nonholo.control.registry import CONTROLLERS, controller  # noqa: E402
+from nonholo.errors import (ExpressionError, InfeasibleReferenceError, NonholoInputError,  # noqa: E402
+                            ScenarioError)
+from nonholo.sim.files import load_scenario, parse_scenario  # noqa: E402
+from nonholo.sim.result import SimulationResult  # noqa: E402
+from nonholo.sim.scenario import Robot, Scenario  # noqa: E402
+from nonholo.sim.simulator import simulate  # noqa: E402
+
+__all__ = [
+    "CONTROLLERS", "ExpressionError", "InfeasibleReferenceError", "NonholoInputError", "Robot", "Scenario",
+    "ScenarioError", "SimulationResult", "controller", "load_scenario", "parse_scenario", "references", "simulate",
+]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 _TWO_OVER_PI = 0.63661977236758134308
@@ -66,3 +67,34 @@ def sinc_of(x, sin_x):
     small = abs(x) < 1e-4
     safe_x = 1.0 if small else x
     return 1.0 - x * x / 6.0 if small else sin_x / safe_x
+
+
+# Beyond this |x| the three-part reduction loses accuracy; array functions defer to numpy.
+SINCOS_EXACT_RANGE = 1.0e6
+
+
+@njit(cache=True, error_model="numpy")
+def _sin_cos_arrays(x, sin_out, cos_out):
+    for i in range(x.size):
+        sin_out[i], cos_out[i] = sincos(x[i])
+
+
+def _array_sincos(x):
+    x = np.asarray(x, dtype=float)
+    flat = np.ascontiguousarray(x).ravel()
+    sin_out, cos_out = np.empty_like(flat), np.empty_like(flat)
+    _sin_cos_arrays(flat, sin_out, cos_out)
+    far = np.abs(flat) > SINCOS_EXACT_RANGE
+    if far.any():
+        sin_out[far], cos_out[far] = np.sin(flat[far]), np.cos(flat[far])
+    return sin_out.reshape(x.shape), cos_out.reshape(x.shape)
+
+
+def array_sin(x):
+    """sin of an array with the SIMD ``sincos`` (numpy beyond ``SINCOS_EXACT_RANGE``)."""
+    return _array_sincos(x)[0]
+
+
+def array_cos(x):
+    """cos of an array with the SIMD ``sincos`` (numpy beyond ``SINCOS_EXACT_RANGE``)."""
+    return _array_sincos(x)[1]

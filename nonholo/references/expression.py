@@ -7,6 +7,7 @@ import numpy as np
 import sympy as sp
 
 from nonholo.expressions import parse_expression
+from nonholo.numerics import array_cos, array_sin
 from nonholo.references.base import FORWARD, Reference
 
 T = sp.Symbol("t", real=True)
@@ -32,7 +33,9 @@ class ExpressionReference(Reference):
             derivatives.append((expr, d1, sp.diff(d1, T)))
         (x0, x1, x2), (y0, y1, y2) = derivatives
         self._exprs = (x0, y0, x1, y1, x2, y2)
-        self._evaluate = sp.lambdify(T, list(self._exprs), modules="numpy", cse=True)
+        # sin and cos dominate the cost of evaluating a reference table: use the SIMD ones.
+        self._evaluate = sp.lambdify(T, list(self._exprs), modules=[{"sin": array_sin, "cos": array_cos}, "numpy"],
+                                     cse=True)
 
     @classmethod
     def from_strings(cls, x: str, y: str, direction: int = FORWARD, default_duration: float | None = None,
