@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import abc
+import asyncio
 from dataclasses import dataclass
 
 from nonholo.comm.envelope import OVERHEAD
@@ -54,3 +55,33 @@ class Transport(abc.ABC):
     def check_frame(self, frame: bytes) -> None:
         if not 0 < len(frame) <= self.capabilities.max_frame:
             raise ValueError(f"frame of {len(frame)} bytes outside 1..{self.capabilities.max_frame}")
+
+
+class InboxTransport(Transport):
+    """A transport whose received frames wait in an asyncio queue (``self.inbox``) until
+    ``recv``; closing puts a sentinel in it so that a pending ``recv`` wakes up."""
+
+    _CLOSED = object()
+
+    def __init__(self) -> None:
+        self.inbox: asyncio.Queue = asyncio.Queue()
+        self._closed = False
+
+    def ensure_open(self) -> None:
+        if self._closed:
+            raise TransportClosed(f"{self.name} is closed")
+
+    async def recv(self) -> tuple[str, bytes]:
+        self.ensure_open()
+        item = await self.inbox.get()
+        if item is self._CLOSED:
+            raise TransportClosed(f"{self.name} is closed")
+        return item
+
+    def mark_closed(self) -> bool:
+        """Mark closed and wake receivers; False if it already was (close is idempotent)."""
+        if self._closed:
+            return False
+        self._closed = True
+        self.inbox.put_nowait(self._CLOSED)
+        return True

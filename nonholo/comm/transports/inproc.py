@@ -2,13 +2,9 @@
 and tests: broadcast visits peers in name order, so runs repeat exactly."""
 from __future__ import annotations
 
-import asyncio
-
 from nonholo.comm.transports.base import (
-    DEFAULT_MAX_FRAME, Capabilities, Transport, TransportClosed, UnknownPeer,
+    DEFAULT_MAX_FRAME, Capabilities, InboxTransport, UnknownPeer,
 )
-
-_CLOSED = object()
 
 
 class InProcNetwork:
@@ -33,37 +29,25 @@ class InProcNetwork:
         else:
             raise UnknownPeer(f"no endpoint named {to!r}")
         for target in targets:
-            target.queue.put_nowait((sender, frame))
+            target.inbox.put_nowait((sender, frame))
 
     def remove(self, name: str) -> None:
         self._endpoints.pop(name, None)
 
 
-class InProcTransport(Transport):
+class InProcTransport(InboxTransport):
     def __init__(self, network: InProcNetwork, name: str) -> None:
         self.name = name
         self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=True,
                                          max_frame=network.max_frame)
-        self.queue: asyncio.Queue = asyncio.Queue()
+        super().__init__()
         self._network = network
-        self._closed = False
 
     async def send(self, frame: bytes, to: str | None = None) -> None:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
+        self.ensure_open()
         self.check_frame(frame)
         self._network.deliver(self.name, bytes(frame), to)
 
-    async def recv(self) -> tuple[str, bytes]:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
-        item = await self.queue.get()
-        if item is _CLOSED:
-            raise TransportClosed(f"{self.name} is closed")
-        return item
-
     async def close(self) -> None:
-        if not self._closed:
-            self._closed = True
+        if self.mark_closed():
             self._network.remove(self.name)
-            self.queue.put_nowait(_CLOSED)

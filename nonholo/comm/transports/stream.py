@@ -12,13 +12,12 @@ import socket
 import struct
 
 from nonholo.comm.transports.base import (
-    DEFAULT_MAX_FRAME, Capabilities, FramingError, Transport, TransportClosed, UnknownPeer,
+    DEFAULT_MAX_FRAME, Capabilities, FramingError, InboxTransport, Transport, TransportClosed, UnknownPeer,
 )
 
 LENGTH = struct.Struct(">I")
 MAX_NAME_BYTES = 255
 HELLO_TIMEOUT_S = 5.0
-_CLOSED = object()
 
 
 def frame_bytes(payload: bytes) -> bytes:
@@ -113,7 +112,7 @@ class StreamClient(Transport):
             pass
 
 
-class StreamServer(Transport):
+class StreamServer(InboxTransport):
     """The hub of the star (the leader, like a piconet master). Accepts connections from
     an ``asyncio.Server`` or from ``attach_socket``; frames from all peers are merged."""
 
@@ -123,10 +122,9 @@ class StreamServer(Transport):
         self.capabilities = _stream_capabilities(max_frame)
         self.server: asyncio.AbstractServer | None = None
         self._writers: dict[str, asyncio.StreamWriter] = {}
-        self._inbox: asyncio.Queue = asyncio.Queue()
         self._tasks: set[asyncio.Task] = set()
         self._peers_changed = asyncio.Event()
-        self._closed = False
+        super().__init__()
 
     @property
     def peers(self) -> list[str]:
@@ -161,7 +159,7 @@ class StreamServer(Transport):
             self._peers_changed.set()
             while True:
                 frame = await read_frame(reader, self.capabilities.max_frame)
-                self._inbox.put_nowait((peer, frame))
+                self.inbox.put_nowait((peer, frame))
         except (TransportClosed, FramingError, asyncio.TimeoutError, ConnectionError):
             pass
         finally:
@@ -171,8 +169,7 @@ class StreamServer(Transport):
             writer.close()
 
     async def send(self, frame: bytes, to: str | None = None) -> None:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
+        self.ensure_open()
         self.check_frame(frame)
         if to is None:
             writers = list(self._writers.values())
@@ -189,18 +186,9 @@ class StreamServer(Transport):
             except ConnectionError:
                 pass  # its reader task notices and drops the peer
 
-    async def recv(self) -> tuple[str, bytes]:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
-        item = await self._inbox.get()
-        if item is _CLOSED:
-            raise TransportClosed(f"{self.name} is closed")
-        return item
-
     async def close(self) -> None:
-        if self._closed:
+        if not self.mark_closed():
             return
-        self._closed = True
         if self.server is not None:
             self.server.close()
         for writer in self._writers.values():
@@ -208,4 +196,3 @@ class StreamServer(Transport):
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        self._inbox.put_nowait(_CLOSED)

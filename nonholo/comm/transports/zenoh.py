@@ -12,10 +12,9 @@ import asyncio
 import zenoh
 
 from nonholo.comm.transports.base import (
-    DEFAULT_MAX_FRAME, Capabilities, Transport, TransportClosed,
+    DEFAULT_MAX_FRAME, Capabilities, InboxTransport,
 )
 
-_CLOSED = object()
 
 
 def peer_config(listen: list[str], connect: list[str]) -> zenoh.Config:
@@ -31,7 +30,7 @@ def _json_list(items: list[str]) -> str:
     return "[" + ",".join(f'"{item}"' for item in items) + "]"
 
 
-class ZenohTransport(Transport):
+class ZenohTransport(InboxTransport):
     def __init__(self, name: str, fleet: str, config: zenoh.Config,
                  max_frame: int = DEFAULT_MAX_FRAME) -> None:
         self.name = name
@@ -39,7 +38,7 @@ class ZenohTransport(Transport):
                                          max_frame=max_frame)
         self._prefix = f"nonholo/{fleet}"
         self._loop = asyncio.get_running_loop()
-        self._inbox: asyncio.Queue = asyncio.Queue()
+        super().__init__()
         self._session = zenoh.open(config)
         self._subscribers = [
             self._session.declare_subscriber(f"{self._prefix}/all", self._on_sample),
@@ -48,7 +47,6 @@ class ZenohTransport(Transport):
         # BLOCK (not the default DROP) so commands and states are never silently dropped;
         # express skips the batching delay.
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._closed = False
 
     def _publisher(self, key: str) -> "zenoh.Publisher":
         if key not in self._publishers:
@@ -59,29 +57,18 @@ class ZenohTransport(Transport):
     def _on_sample(self, sample: "zenoh.Sample") -> None:  # runs on a Zenoh thread
         sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else "?"
         if sender != self.name:
-            self._loop.call_soon_threadsafe(self._inbox.put_nowait,
+            self._loop.call_soon_threadsafe(self.inbox.put_nowait,
                                             (sender, sample.payload.to_bytes()))
 
     async def send(self, frame: bytes, to: str | None = None) -> None:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
+        self.ensure_open()
         self.check_frame(frame)
         key = f"{self._prefix}/all" if to is None else f"{self._prefix}/to/{to}"
         self._publisher(key).put(frame, attachment=self.name.encode("utf-8"))
 
-    async def recv(self) -> tuple[str, bytes]:
-        if self._closed:
-            raise TransportClosed(f"{self.name} is closed")
-        item = await self._inbox.get()
-        if item is _CLOSED:
-            raise TransportClosed(f"{self.name} is closed")
-        return item
-
     async def close(self) -> None:
-        if self._closed:
+        if not self.mark_closed():
             return
-        self._closed = True
         for entity in [*self._publishers.values(), *self._subscribers]:
             entity.undeclare()
         self._session.close()
-        self._inbox.put_nowait(_CLOSED)
