@@ -20,7 +20,8 @@ def test_rk4_agrees_with_solve_ivp():
 
 
 def test_batch_equals_single_runs():
-    configs = [controller("kanayama", kx=3.0), controller("dynamic-feedback", kp=2.0), controller("cascaded")]
+    configs = [controller("kanayama", kx=3.0), controller("dynamic-feedback", kp=2.0), controller("cascaded"),
+               controller("cascaded", c1=20.0)]  # a different stiffness: its own sub-steps
     robots = [Robot(f"r{i}", c, (0.1 * i, -0.2, 0.1)) for i, c in enumerate(configs)]
     batch = simulate(Scenario(references.circle(), robots, duration=30.0, dt=0.01), record=False)
     for i, robot in enumerate(robots):

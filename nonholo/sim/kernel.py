@@ -28,6 +28,7 @@ import math
 import llvmlite.binding
 import numpy as np
 from numba import njit
+from numba.core.dispatcher import Dispatcher
 
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.numerics import sincos, wrap_angle
@@ -47,7 +48,9 @@ REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA = range(6)
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
 MAX_GAINS = 5
 
-_OPTIONS = dict(cache=True, error_model="numpy")
+# "contract" lets LLVM fuse a*b + c into one FMA instruction (deterministic, and more
+# accurate); no other fast-math relaxations, so NaN/inf semantics and ordering stay IEEE.
+_OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract"})
 
 
 def new_stats(n: int) -> np.ndarray:
@@ -174,12 +177,26 @@ def substep(law, sampled_data, state, rows, row, h, gains, limits, held):
         state[3, i] = xi + sixth * (d1 + 2.0 * (d2 + d3) + d4)
 
 
-def _stable_identity(law) -> None:
-    """Give the law's dispatcher a deterministic pickling identity. numba keys its disk
-    cache of a closure on the pickled closure variables, and a dispatcher pickles with a
-    random per-process uuid unless one was set: without this every process recompiles."""
-    if getattr(law, "_MemoMixin__uuid", None) is None:
-        law._set_uuid(f"{law.py_func.__module__}.{law.py_func.__qualname__}")
+def stable_cache_identity(dispatcher, _seen=None) -> None:
+    """Give ``dispatcher`` and every compiled function its code calls (recursively) a
+    deterministic pickling identity.
+
+    numba keys its disk cache of a closure on the pickled closure variables; a law pickles
+    *with the functions it calls*, each with a random per-process uuid unless one was set.
+    Without this every process would recompile every kernel.
+    """
+    seen = set() if _seen is None else _seen
+    if id(dispatcher) in seen:
+        return
+    seen.add(id(dispatcher))
+    function = dispatcher.py_func
+    if getattr(dispatcher, "_MemoMixin__uuid", None) is None:
+        dispatcher._set_uuid(f"{function.__module__}.{function.__qualname__}")
+    called = [function.__globals__.get(name) for name in function.__code__.co_names]
+    called += [cell.cell_contents for cell in function.__closure__ or ()]
+    for value in called:
+        if isinstance(value, Dispatcher):
+            stable_cache_identity(value, seen)
 
 
 def make_integrator(law, recording: bool):
@@ -198,7 +215,7 @@ def make_integrator(law, recording: bool):
     Only these closures capture ``law``: numba caches closures over module-level
     functions across processes, not closures over other closures.
     """
-    _stable_identity(law)
+    stable_cache_identity(law)
 
     @njit(**_OPTIONS)
     def integrate(state, gains, limits, rows, row_start, substeps, dt, hold_every, k_start, k_stop, n_steps,

@@ -72,12 +72,14 @@ class Scenario:
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
             raise NonholoInputError(f"duration must be a positive number of seconds, got {duration!r}")
         object.__setattr__(self, "duration", float(duration))
-        if self.dt is not None and self.steps is not None:
-            raise NonholoInputError("give dt or steps, not both")
         if self.steps is not None:
             if not (isinstance(self.steps, int) and self.steps >= 1):
                 raise NonholoInputError(f"steps must be a positive integer, got {self.steps!r}")
-            object.__setattr__(self, "dt", self.duration / self.steps)
+            dt_of_steps = self.duration / self.steps
+            # A scenario built with steps carries the derived dt (dataclasses.replace passes both).
+            if self.dt is not None and not math.isclose(self.dt, dt_of_steps, rel_tol=1e-12):
+                raise NonholoInputError("give dt or steps, not both")
+            object.__setattr__(self, "dt", dt_of_steps)
         dt = 0.01 if self.dt is None else self.dt
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise NonholoInputError(f"dt must be a positive number of seconds, got {dt!r}")

@@ -15,7 +15,7 @@ from functools import cache
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo.control.registry import ControllerConfig
+from nonholo.control.registry import CONTROLLERS, TrackingController
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats
@@ -40,24 +40,32 @@ def integrator(law, recording: bool):
     return make_integrator(law, recording)
 
 
-def _substep_plan(scenario: Scenario, stiffness: float) -> np.ndarray:
-    """Sub-steps per output step: uniform if given, else from the law's stiffness."""
-    n = scenario.n_steps
+def _substep_plan(scenario: Scenario, stiffness: float) -> tuple[int, int, int]:
+    """(sub-steps per output step, refined sub-steps, output steps refined at the start):
+    uniform if the scenario gives them, else from the law's stiffness (the fastest
+    closed-loop rate, 1/s)."""
+    if scenario.method != "rk4":
+        return 1, 1, 0
     if scenario.substeps is not None:
-        return np.full(n, scenario.substeps, dtype=np.int64)
+        return scenario.substeps, scenario.substeps, 0
     base = max(1, math.ceil(stiffness * scenario.dt / STABLE_STEP_FACTOR))
     if base > MAX_SUBSTEPS:
         raise NonholoInputError(
             f"the control law is too stiff for dt = {scenario.dt:g} s (fastest rate {stiffness:.3g} 1/s would need "
             f"{base} sub-steps per step): reduce dt or lower the gains")
-    plan = np.full(n, base, dtype=np.int64)
-    if base > 1:
-        startup_steps = math.ceil(STARTUP_TIME_CONSTANTS / stiffness / scenario.dt)
-        plan[:startup_steps] = base * STARTUP_REFINEMENT
-    return plan
+    if base == 1:
+        return 1, 1, 0
+    return base, base * STARTUP_REFINEMENT, math.ceil(STARTUP_TIME_CONSTANTS / stiffness / scenario.dt)
 
 
-def _stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _plan_array(plan: tuple[int, int, int], n_steps: int) -> np.ndarray:
+    base, refined, refined_steps = plan
+    substeps = np.full(n_steps, base, dtype=np.int64)
+    substeps[:refined_steps] = refined
+    return substeps
+
+
+def stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Times of every RK4 stage row and the first row of each output step."""
     if (plan == plan[0]).all():  # uniform sub-steps: a plain arithmetic sequence
         m = int(plan[0])
@@ -72,12 +80,12 @@ def _stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return times, row_start
 
 
-def _check_reference(scenario: Scenario, config: ControllerConfig, rows: np.ndarray) -> None:
-    if not config.controller.needs_moving_reference:
+def _check_reference(scenario: Scenario, controller: TrackingController, rows: np.ndarray) -> None:
+    if not controller.needs_moving_reference:
         return
     speed = np.abs(rows[:, REF_V])
     if speed.min() < 1e-3 * max(1.0, speed.max()):
-        scenario.reference.check_speed(0.0, rows[-1, 0], who=f"the {config.name} controller")
+        scenario.reference.check_speed(0.0, rows[-1, 0], who=f"the {controller.name} controller")
 
 
 def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.ndarray:
@@ -95,10 +103,16 @@ def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.n
     return state
 
 
-def _group_robots(scenario: Scenario) -> dict:
+def _group_robots(scenario: Scenario, v_peak: float, omega_peak: float) -> dict:
+    """Robots integrated together: same law and same sub-step plan, so that a robot's
+    result does not depend on the batch it is simulated in."""
     groups = defaultdict(list)
     for index, robot in enumerate(scenario.robots):
-        groups[robot.controller.law].append(index)
+        config = robot.controller
+        # Laws that use ω_d must also resolve the reference's own turning.
+        stiffness = max(config.stiffness(v_peak, omega_peak),
+                        omega_peak if config.controller.needs_moving_reference else 0.0)
+        groups[config.law, _substep_plan(scenario, stiffness)].append(index)
     return groups
 
 
@@ -116,20 +130,16 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
     stats = np.empty((STAT_COUNT, n_robots))
     record_array = np.empty((6, n_steps + 1 if record else 0, n_robots))
     substeps = np.empty(n_robots, dtype=np.int64)
-    rows_by_plan: dict[bytes, tuple] = {}
-    for law, members in _group_robots(scenario).items():
+    rows_by_plan: dict[tuple, tuple] = {}
+    for controller_name in dict.fromkeys(r.controller.name for r in scenario.robots):
+        _check_reference(scenario, CONTROLLERS[controller_name], survey)
+    for (law, plan_key), members in _group_robots(scenario, v_peak, omega_peak).items():
         robots = [scenario.robots[i] for i in members]
-        for robot in robots:
-            _check_reference(scenario, robot.controller, survey)
-        # Laws that use ω_d must also resolve the reference's own turning.
-        stiffness = max(max(r.controller.stiffness(v_peak, omega_peak) for r in robots),
-                        omega_peak if robots[0].controller.controller.needs_moving_reference else 0.0)
-        plan = _substep_plan(scenario, stiffness) if scenario.method == "rk4" else np.ones(n_steps, dtype=np.int64)
-        key = plan.tobytes()
-        if key not in rows_by_plan:
-            times, row_start = _stage_times(scenario.dt, plan)
-            rows_by_plan[key] = (scenario.reference.table(times), row_start)
-        rows, row_start = rows_by_plan[key]
+        plan = _plan_array(plan_key, n_steps)
+        if plan_key not in rows_by_plan:
+            times, row_start = stage_times(scenario.dt, plan)
+            rows_by_plan[plan_key] = (scenario.reference.table(times), row_start)
+        rows, row_start = rows_by_plan[plan_key]
         if grid_rows is None:  # every plan has a row at each t_k
             stride = row_start[1] - row_start[0]
             uniform = row_start[-1] == stride * n_steps
@@ -147,8 +157,7 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
             _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, group_stats, group_record,
                      progress)
         else:
-            _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, group_stats, group_record,
-                           stiffness)
+            _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, group_stats, group_record)
         stats[:, members] = group_stats
         record_array[:, :, members] = group_record
         substeps[members] = plan.max()
@@ -182,7 +191,7 @@ SOLVE_IVP_TOLERANCE = 1e-10
 STIFF_RATE = 50.0
 
 
-def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, stats, record, stiffness):
+def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, stats, record):
     """scipy cross-check: DOP853 (Radau for stiff laws), rtol = atol = 1e-10, dense output
     sampled on the same grid and scored by the same compiled code."""
     n = state.shape[1]
@@ -193,6 +202,8 @@ def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, 
         law_rates(y.reshape(4, n), reference.table(np.array([t])), gains, limits, rates)
         return rates.ravel().copy()
 
+    v_peak, omega_peak = np.abs(grid_rows[:, REF_V]).max(), np.abs(grid_rows[:, REF_OMEGA]).max()
+    stiffness = max(r.controller.stiffness(v_peak, omega_peak) for r in scenario.robots)
     method = "Radau" if stiffness > STIFF_RATE else "DOP853"
     solution = solve_ivp(rhs, (0.0, grid_rows[-1, 0]), state.ravel(), method=method, t_eval=grid_rows[:, 0],
                          rtol=SOLVE_IVP_TOLERANCE, atol=SOLVE_IVP_TOLERANCE)
