@@ -1,0 +1,76 @@
+"""``nonholo sweep SCENARIO --gain NAME=START:STOP:COUNT [--gain …]``: a gain grid as one batch."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sweep", help="vary one or two gains over a grid (one batch) and write a CSV and a plot",
+        description="Simulate one robot of a scenario for every point of a grid of one or two of its gains "
+                    "(the other gains as in the scenario), all as one batch, and report an error metric per point.",
+        epilog="Example: nonholo sweep test1-eight --robot kanayama --gain kx=1:20:40 --gain ky=0.001:0.03:40. "
+               "Exit codes: 0 ok, 1 failure, 2 bad input.")
+    parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
+    parser.add_argument("--gain", action="append", required=True, metavar="NAME=START:STOP:COUNT",
+                        help="a gain and its grid (COUNT values, START and STOP included); once or twice")
+    parser.add_argument("--metric", choices=("mean", "rms", "max", "final"), default="mean",
+                        help="error-norm statistic to report and plot (default: %(default)s)")
+    parser.add_argument("--robot", help="the robot whose gains are varied (needed if several have those gains)")
+    parser.add_argument("--steps", type=int, help="override the scenario's number of output steps N")
+    parser.add_argument("--out", metavar="DIR", help="write sweep.csv, sweep.json and sweep.png to DIR")
+    parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    from nonholo import examples
+    from nonholo.errors import NonholoInputError
+    from nonholo.sim.files import load_scenario
+    from nonholo.studies.sweep import GainAxis, run_sweep
+
+    try:
+        axes = [GainAxis.parse(text) for text in args.gain]
+        if args.steps is not None and args.steps < 1:
+            raise NonholoInputError(f"--steps must be a positive integer, got {args.steps}")
+        result = run_sweep(load_scenario(examples.resolve(args.scenario)), axes, robot=args.robot, metric=args.metric,
+                           steps=args.steps, progress=False if args.quiet else None)
+    except NonholoInputError as exc:
+        print(f"nonholo sweep: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (RuntimeError, OSError) as exc:
+        print(f"nonholo sweep: failed: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        result.write_csv(out / "sweep.csv")
+        result.write_json(out / "sweep.json")
+        result.plot(out / "sweep.png")
+    if args.json:
+        json.dump(result.to_dict(), sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(describe(result))
+    return EXIT_OK
+
+
+def describe(result) -> str:
+    """A short text summary: the best point and, for one gain, the trend and every value."""
+    values = result.values
+    best = tuple(int(i) for i in __import__("numpy").unravel_index(values.argmin(), values.shape))
+    where = ", ".join(f"{a.name} = {a.values[i]:g}" for a, i in zip(result.axes, best))
+    lines = [f"{result.scenario}, robot {result.robot} ({result.controller}): {result.points} points in "
+             f"{result.elapsed_s:.2f} s; lowest {result.metric} error {values.min():.4g} m at {where}"]
+    if len(result.axes) == 1:
+        axis = result.axes[0]
+        lines.append(f"trend of the {result.metric} error as {axis.name} increases: {result.trend().word}")
+        if axis.values.size <= 50:
+            lines += [f"  {axis.name} = {g:<10.4g} {result.metric} = {v:.6g} m" for g, v in zip(axis.values, values)]
+    return "\n".join(lines)

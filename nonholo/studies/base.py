@@ -1,0 +1,104 @@
+"""The study registry convention.
+
+A *study* is a reproducible experiment that writes one section of the report. Every
+module of ``nonholo.studies`` that defines a module-level ``STUDY`` (a ``Study``) is
+discovered by ``discover()``, the way ``nonholo.cli`` discovers commands, so adding a study
+(``formation.py``, ``posture.py``…) never edits this package's other files.
+
+``Study.run(options) -> StudyResult``. A ``StudyResult`` carries its data and knows how to
+present itself: ``text()`` for the terminal, ``html_section(folder)`` for the report
+(it writes its figures into ``folder`` and returns an HTML fragment that refers to them by
+relative path), ``write_data(folder)`` for CSV/JSON, ``to_dict()`` and ``ok``.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+SAMPLINGS = ("uniform", "solver-steps", "both")
+
+
+@dataclass(frozen=True)
+class StudyOptions:
+    """What every study is told: where to write, how thorough to be, whether to show
+    progress bars, and which statistics to take (``SAMPLINGS``; studies without a
+    variable-step variant ignore it)."""
+
+    out_dir: Path
+    quick: bool = False
+    progress: bool = True
+    sampling: str = "both"
+
+    def __post_init__(self):
+        if self.sampling not in SAMPLINGS:
+            from nonholo.errors import NonholoInputError
+
+            raise NonholoInputError(f"unknown sampling {self.sampling!r} (valid: {', '.join(SAMPLINGS)})")
+        object.__setattr__(self, "out_dir", Path(self.out_dir))
+
+    def folder(self, study: str) -> Path:
+        """The study's own folder inside the report (created)."""
+        path = self.out_dir / study
+        path.mkdir(parents=True, exist_ok=True)
+        return path
+
+
+class StudyResult(ABC):
+    """What a study returns (see the module docstring)."""
+
+    name: str
+    title: str
+    elapsed_s: float
+
+    @property
+    def ok(self) -> bool:
+        """False if the study found something that should fail the command (exit code 1)."""
+        return True
+
+    @abstractmethod
+    def text(self) -> str:
+        """Plain-text summary for the terminal."""
+
+    @abstractmethod
+    def html_section(self, folder: Path) -> str:
+        """An HTML fragment (figures written into ``folder``, referred to relatively
+        from the report's ``index.html`` one level up)."""
+
+    @abstractmethod
+    def write_data(self, folder: Path) -> list[Path]:
+        """CSV/JSON files of the results; returns their paths."""
+
+    @abstractmethod
+    def to_dict(self) -> dict:
+        """JSON-ready results."""
+
+
+@dataclass(frozen=True)
+class Study:
+    """A registered study: ``name`` (the CLI's argument), ``title``, one-line ``summary``
+    and ``run(options) -> StudyResult``."""
+
+    name: str
+    title: str
+    summary: str
+    run: Callable[[StudyOptions], StudyResult]
+
+
+def discover() -> dict[str, Study]:
+    """Every ``STUDY`` defined by a module of this package, by name (sorted)."""
+    import nonholo.studies as package
+
+    found = {}
+    for module_info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if module_info.name.startswith("_"):
+            continue
+        study = getattr(importlib.import_module(f"{package.__name__}.{module_info.name}"), "STUDY", None)
+        if isinstance(study, Study):
+            if study.name in found:
+                raise RuntimeError(f"two studies are named {study.name!r}")
+            found[study.name] = study
+    return found

@@ -1,0 +1,267 @@
+"""Gain sweeps: one or two gains of one robot varied over a grid, simulated as one batch
+(one ``Scenario`` with a robot per grid point, statistics only), and the trend of a metric
+along a one-gain sweep.
+
+>>> axis = GainAxis.parse("b=0.5:2:4")
+>>> axis.name, axis.values.tolist()
+('b', [0.5, 1.0, 1.5, 2.0])
+>>> classify_trend([3.0, 2.0, 1.5, 1.49999, 1.0]).word
+'decreases'
+>>> classify_trend([1.0, 2.0, 1.0, 2.0]).word
+'oscillates'
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nonholo.errors import NonholoInputError
+from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim.simulator import simulate
+
+METRICS = ("mean", "rms", "max", "final")
+
+# Trend classification (see classify_trend): a step between neighbouring grid points counts
+# only if it exceeds this fraction of the metric's range over the sweep, and a metric that
+# varies by less than FLAT_FRACTION of its largest value has "no effect".
+SIGNIFICANT_STEP_FRACTION = 0.01
+FLAT_FRACTION = 1e-3
+TREND_WORDS = ("decreases", "increases", "decreases, then increases", "increases, then decreases", "oscillates",
+               "increases, then oscillates", "decreases, then oscillates", "no effect")
+
+
+@dataclass(frozen=True)
+class GainAxis:
+    """One swept gain: its name and the grid of values (linearly spaced)."""
+
+    name: str
+    values: np.ndarray
+
+    @classmethod
+    def linear(cls, name: str, start: float, stop: float, count: int) -> "GainAxis":
+        if count < 1:
+            raise NonholoInputError(f"gain {name!r}: COUNT must be at least 1, got {count}")
+        if not (math.isfinite(start) and math.isfinite(stop)):
+            raise NonholoInputError(f"gain {name!r}: START and STOP must be finite numbers")
+        return cls(name, np.linspace(start, stop, count))
+
+    @classmethod
+    def parse(cls, text: str) -> "GainAxis":
+        """``NAME=START:STOP:COUNT`` (COUNT values from START to STOP inclusive)."""
+        name, sep, spec = text.partition("=")
+        parts = spec.split(":")
+        if not sep or not name.strip() or len(parts) != 3:
+            raise NonholoInputError(f"--gain must look like NAME=START:STOP:COUNT, got {text!r}")
+        try:
+            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise NonholoInputError(f"--gain {text!r}: START and STOP must be numbers and COUNT an integer") from None
+        return cls.linear(name.strip(), start, stop, count)
+
+
+@dataclass(frozen=True)
+class Trend:
+    """How a metric moves as the gain increases.
+
+    ``runs``: the directions ("increases"/"decreases") of the maximal monotone stretches
+    of the significant steps, in order; ``word``: one of ``TREND_WORDS``.
+    """
+
+    runs: tuple[str, ...]
+    word: str
+
+    def agrees_with(self, claim: str) -> bool:
+        """Whether a claim in ``TREND_WORDS`` describes this trend. "oscillates" means at
+        least three monotone stretches; "X, then oscillates" also requires the first to be X."""
+        if claim == "oscillates":
+            return len(self.runs) >= 3
+        if claim.endswith(", then oscillates"):
+            return len(self.runs) >= 3 and self.runs[0] == claim.split(",")[0]
+        return claim == self.word
+
+
+def classify_trend(values: Sequence[float]) -> Trend:
+    """Classify a metric along increasing gain values.
+
+    Let R = max − min of the values. If R ≤ FLAT_FRACTION·max|value| the gain has "no
+    effect". Otherwise the steps between neighbouring grid points with |step| >
+    SIGNIFICANT_STEP_FRACTION·R are kept (smaller wiggles are ignored), consecutive steps of
+    the same sign are merged into runs, and: one run → "decreases"/"increases"; two runs →
+    "X, then Y"; three or more → "oscillates".
+    """
+    values = np.asarray(values, dtype=float)
+    spread = float(values.max() - values.min()) if values.size else 0.0
+    if values.size < 2 or spread <= FLAT_FRACTION * float(np.abs(values).max()):
+        return Trend((), "no effect")
+    steps = np.diff(values)
+    signs = np.sign(steps[np.abs(steps) > SIGNIFICANT_STEP_FRACTION * spread])
+    runs: list[str] = []
+    for sign in signs:
+        direction = "increases" if sign > 0 else "decreases"
+        if not runs or runs[-1] != direction:
+            runs.append(direction)
+    if len(runs) == 1:
+        word = runs[0]
+    elif len(runs) == 2:
+        word = f"{runs[0]}, then {runs[1]}"
+    else:
+        word = "oscillates"
+    return Trend(tuple(runs), word)
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """A finished sweep: ``errors[statistic]`` has the grid's shape (len(axes[0]) [×
+    len(axes[1])]) for statistic in mean, std, rms, max, final; ``values`` is the chosen
+    ``metric``."""
+
+    scenario: str
+    robot: str
+    controller: str
+    axes: tuple[GainAxis, ...]
+    metric: str
+    errors: dict
+    elapsed_s: float  # of the whole batch this sweep was simulated in
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.errors[self.metric]
+
+    @property
+    def points(self) -> int:
+        return int(np.prod([a.values.size for a in self.axes]))
+
+    def trend(self) -> Trend:
+        """The metric's trend along a one-gain sweep."""
+        if len(self.axes) != 1:
+            raise ValueError("a trend is defined for one-gain sweeps only")
+        return classify_trend(self.values)
+
+    def rows(self) -> list[list[float]]:
+        """One row per grid point: the gain values, then every error statistic."""
+        grids = np.meshgrid(*(a.values for a in self.axes), indexing="ij")
+        columns = [g.ravel() for g in grids] + [self.errors[s].ravel() for s in _STATISTICS]
+        return np.column_stack(columns).tolist()
+
+    def header(self) -> list[str]:
+        return [a.name for a in self.axes] + [f"error_{s}" for s in _STATISTICS]
+
+    def write_csv(self, path: Path) -> Path:
+        with open(path, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(self.header())
+            writer.writerows([[f"{v:.10g}" for v in row] for row in self.rows()])
+        return Path(path)
+
+    def to_dict(self) -> dict:
+        out = {"scenario": self.scenario, "robot": self.robot, "controller": self.controller, "metric": self.metric,
+               "axes": {a.name: a.values.tolist() for a in self.axes}, "points": self.points,
+               "elapsed_s": self.elapsed_s, "errors": {s: self.errors[s].tolist() for s in _STATISTICS}}
+        if len(self.axes) == 1:
+            trend = self.trend()
+            out["trend"] = {"word": trend.word, "runs": list(trend.runs)}
+        return out
+
+    def write_json(self, path: Path) -> Path:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False))
+        return Path(path)
+
+    def plot(self, path=None, ax=None):
+        """A line (one gain) or a heat map (two gains) of the metric; saves to ``path``."""
+        from nonholo.studies.plots import plot_sweep
+
+        return plot_sweep(self, path, ax)
+
+
+_STATISTICS = ("mean", "std", "rms", "max", "final")
+
+
+def choose_robot(scenario: Scenario, gains: Sequence[str], name: str | None = None) -> Robot:
+    """The robot whose gains are swept: ``name``, or the only robot whose controller has
+    all ``gains`` (an error lists the candidates when several have)."""
+    if name is not None:
+        for robot in scenario.robots:
+            if robot.name == name:
+                return robot
+        raise NonholoInputError(f"no robot named {name!r} (robots: {', '.join(r.name for r in scenario.robots)})")
+    candidates = [r for r in scenario.robots if all(g in r.controller.controller.accepted_gains for g in gains)]
+    if len(candidates) == 1 or len(scenario.robots) == 1:
+        return (candidates or scenario.robots)[0]
+    if not candidates:
+        raise NonholoInputError(f"no robot of {scenario.name} has the gains {', '.join(gains)}")
+    raise NonholoInputError(f"several robots have the gains {', '.join(gains)}: choose one with --robot "
+                            f"({', '.join(r.name for r in candidates)})")
+
+
+def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> list[Robot]:
+    """One copy of ``base`` per grid point (row-major over ``axes``), with that point's
+    gains and the same start, limits, variant and ξ(0)."""
+    names = [a.name for a in axes]
+    if len(set(names)) != len(names):
+        raise NonholoInputError(f"a gain is swept twice: {', '.join(names)}")
+    config = base.controller
+    fixed = dict(config.gains)
+    if config.xi0 is not None:
+        fixed[config.controller.initial_compensator] = config.xi0
+    for alias, targets in config.controller.aliases.items():
+        if alias in names:
+            for target in targets:
+                fixed.pop(target, None)
+    grids = np.meshgrid(*(a.values for a in axes), indexing="ij")
+    return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
+                                controller=config.controller.configure(
+                                    {**fixed, **{n: float(v) for n, v in zip(names, point)}}, config.variant))
+            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """One sweep of a batch: the robot of the scenario to vary and the gain axes."""
+
+    axes: tuple[GainAxis, ...]
+    robot: str | None = None
+
+
+def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "mean", steps: int | None = None,
+               progress: bool | None = None) -> list[SweepResult]:
+    """Several sweeps of one scenario simulated together as ONE batch (one ``simulate``
+    call, statistics only); ``steps`` overrides the scenario's number of output steps."""
+    if metric not in METRICS:
+        raise NonholoInputError(f"unknown metric {metric!r} (valid: {', '.join(METRICS)})")
+    bases, robots, spans = [], [], []
+    for number, spec in enumerate(specs):
+        if not 1 <= len(spec.axes) <= 2:
+            raise NonholoInputError(f"sweep one or two gains, got {len(spec.axes)}")
+        base = choose_robot(scenario, [a.name for a in spec.axes], spec.robot)
+        batch = sweep_robots(base, spec.axes, prefix=f"{number}:" if len(specs) > 1 else "")
+        spans.append(slice(len(robots), len(robots) + len(batch)))
+        bases.append(base)
+        robots += batch
+    if steps is not None:
+        scenario = dataclasses.replace(scenario, dt=None, steps=steps)
+    started = time.perf_counter()
+    result = simulate(dataclasses.replace(scenario, robots=tuple(robots), steps=None, name=f"{scenario.name}-sweep"),
+                      record=False, progress=progress)
+    elapsed = time.perf_counter() - started
+    sweeps = []
+    for spec, base, span in zip(specs, bases, spans):
+        shape = tuple(a.values.size for a in spec.axes)
+        errors = {s: getattr(result.metrics, f"error_{s}")[span].reshape(shape).copy() for s in _STATISTICS}
+        sweeps.append(SweepResult(scenario.name, base.name, base.controller.name, tuple(spec.axes), metric, errors,
+                                  elapsed))
+    return sweeps
+
+
+def run_sweep(scenario: Scenario, axes: Sequence[GainAxis], robot: str | None = None, metric: str = "mean",
+              steps: int | None = None, progress: bool | None = None) -> SweepResult:
+    """Simulate the grid of ``axes`` (one or two gains) for one robot of ``scenario`` as
+    one batch (see ``run_sweeps``)."""
+    return run_sweeps(scenario, [SweepSpec(tuple(axes), robot)], metric, steps, progress)[0]

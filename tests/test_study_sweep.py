@@ -1,0 +1,85 @@
+"""Gain sweeps: grid parsing, trend classification, batch = direct simulations."""
+import numpy as np
+import pytest
+
+import nonholo as nh
+from nonholo.studies.sweep import GainAxis, SweepSpec, classify_trend, run_sweep, run_sweeps
+
+
+def short_scenario():
+    robots = [nh.Robot("dfl", nh.controller("dynamic-feedback")), nh.Robot("kan", nh.controller("kanayama")),
+              nh.Robot("lin", nh.controller("approximate-linearization")),
+              nh.Robot("nl", nh.controller("nonlinear"))]
+    return nh.Scenario(nh.references.eight(), robots, duration=30.0, steps=3000, name="short")
+
+
+@pytest.mark.parametrize("values, word", [
+    ([3, 2, 1], "decreases"), ([1, 2, 3], "increases"), ([1, 1, 1], "no effect"),
+    ([1.0, 1.0000001, 1.0], "no effect"), ([3, 1, 2], "decreases, then increases"),
+    ([1, 3, 2], "increases, then decreases"), ([1, 3, 2, 4], "oscillates"),
+    ([3.0, 2.0, 2.001, 1.0], "decreases"),  # a wiggle below 1 % of the range is ignored
+    ([3.0, 2.0, 2.1, 1.0], "oscillates")])
+def test_classify_trend(values, word):
+    assert classify_trend(values).word == word
+
+
+def test_trend_agreement_with_claims():
+    assert classify_trend([1, 3, 2, 4]).agrees_with("oscillates")
+    assert classify_trend([1, 3, 2, 4]).agrees_with("increases, then oscillates")
+    assert not classify_trend([4, 3, 2, 4, 1]).agrees_with("increases, then oscillates")
+    assert classify_trend([3, 2, 1]).agrees_with("decreases")
+    assert not classify_trend([3, 2, 1]).agrees_with("increases")
+
+
+@pytest.mark.parametrize("text", ["zeta", "zeta=1:2", "zeta=a:2:3", "=1:2:3", "zeta=1:2:0", "zeta=1:inf:3"])
+def test_bad_gain_specs(text):
+    with pytest.raises(nh.NonholoInputError):
+        GainAxis.parse(text)
+
+
+def test_two_gain_sweep_equals_direct_simulations():
+    scenario = short_scenario()
+    axes = [GainAxis.parse("kx=1:9:3"), GainAxis.parse("ky=0.01:0.05:2")]
+    sweep = run_sweep(scenario, axes, metric="rms")
+    assert sweep.values.shape == (3, 2) and sweep.points == 6
+    for i, kx in enumerate(axes[0].values):
+        for j, ky in enumerate(axes[1].values):
+            robot = nh.Robot("one", nh.controller("kanayama", kx=float(kx), ky=float(ky)))
+            direct = nh.simulate(nh.Scenario(scenario.reference, [robot], duration=30.0, steps=3000),
+                                 record=False).metrics
+            assert sweep.values[i, j] == pytest.approx(float(direct.error_rms[0]), rel=1e-12)
+    assert len(sweep.rows()) == 6 and sweep.header()[:2] == ["kx", "ky"]
+
+
+def test_several_sweeps_in_one_batch_keep_their_own_results():
+    scenario = short_scenario()
+    together = run_sweeps(scenario, [SweepSpec((GainAxis.parse("zeta=0.2:0.8:3"),), "lin"),
+                                     SweepSpec((GainAxis.parse("kp=0.5:2:3"),), "dfl")])
+    alone = run_sweep(scenario, [GainAxis.parse("kp=0.5:2:3")], robot="dfl")
+    np.testing.assert_allclose(together[1].values, alone.values, rtol=1e-12)
+    assert together[0].controller == "approximate-linearization"
+
+
+def test_robot_choice_and_bad_input():
+    scenario = short_scenario()
+    assert run_sweep(scenario, [GainAxis.parse("kd1=0.5:1:2")]).robot == "dfl"
+    with pytest.raises(nh.NonholoInputError, match="--robot"):
+        run_sweep(scenario, [GainAxis.parse("zeta=0.2:0.8:3")])
+    with pytest.raises(nh.NonholoInputError, match="must be in"):
+        run_sweep(scenario, [GainAxis.parse("zeta=0.5:1.5:3")], robot="lin")
+    with pytest.raises(nh.NonholoInputError, match="metric"):
+        run_sweep(scenario, [GainAxis.parse("kx=1:2:2")], metric="median")
+    with pytest.raises(nh.NonholoInputError, match="no robot named"):
+        run_sweep(scenario, [GainAxis.parse("kx=1:2:2")], robot="nobody")
+
+
+def test_plots_and_files(tmp_path):
+    scenario = short_scenario()
+    line = run_sweep(scenario, [GainAxis.parse("kx=1:9:4")])
+    heat = run_sweep(scenario, [GainAxis.parse("kx=1:9:3"), GainAxis.parse("ky=0.01:0.05:3")])
+    for name, sweep in (("line", line), ("heat", heat)):
+        sweep.plot(tmp_path / f"{name}.png")
+        assert (tmp_path / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+        sweep.write_csv(tmp_path / f"{name}.csv")
+        assert len((tmp_path / f"{name}.csv").read_text().splitlines()) == sweep.points + 1
+    assert "trend" in line.to_dict() and "trend" not in heat.to_dict()
