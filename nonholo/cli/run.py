@@ -25,27 +25,24 @@ def register(subparsers) -> None:
     parser.set_defaults(handler=handle)
 
 
-def _scenario_path(name: str) -> Path:
-    from nonholo import examples
-
-    path = Path(name)
-    if path.exists() or path.suffix == ".toml":
-        return path
-    try:
-        return examples.path(name)
-    except KeyError:
-        return path
-
-
 def handle(args: argparse.Namespace) -> int:
+    from nonholo import examples
     from nonholo.errors import NonholoInputError
     from nonholo.sim.files import load_scenario
-    from nonholo.sim.simulator import simulate
 
     try:
-        scenario = load_scenario(_scenario_path(args.scenario))
-        result = simulate(scenario, record=bool(args.plot or args.out or not args.json),
-                          progress=False if args.quiet else None)
+        scenario = load_scenario(examples.resolve(args.scenario))
+        if _is_formation(scenario):
+            from nonholo.formation import simulate_formation
+            from nonholo.formation.report import format_formation_summary
+
+            result, formatter = simulate_formation(scenario), format_formation_summary
+        else:
+            from nonholo.sim.simulator import simulate
+
+            result = simulate(scenario, record=bool(args.plot or args.out or not args.json),
+                              progress=False if args.quiet else None)
+            formatter = format_summary
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -54,12 +51,20 @@ def handle(args: argparse.Namespace) -> int:
         result.plot(path=args.plot)
     if args.out:
         write_outputs(result, summary, Path(args.out))
+        if _is_formation(scenario):
+            result.write_gif(Path(args.out) / "formation.gif")
     if args.json:
         json.dump(summary, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(format_summary(summary))
+        print(formatter(summary))
     return EXIT_OK
+
+
+def _is_formation(scenario) -> bool:
+    from nonholo.formation.model import Formation
+
+    return isinstance(scenario, Formation)
 
 
 def write_outputs(result, summary: dict, out: Path) -> None:

@@ -22,6 +22,10 @@ Schema (every field optional unless marked)::
     variant = "linear"     # cascaded only: "linear" (Eq 4.24) or "sine" (Eq 4.25)
     v_max = 2.0            # optional actuator limits
     omega_max = 3.0
+
+A file whose robots include followers (``formation = ...``) or posture leaders
+(``goal = [x, y, theta]``) is a formation file: see ``nonholo.formation.files`` for the
+extended schema; ``parse_scenario`` then returns a ``nonholo.formation.Formation``.
 """
 from __future__ import annotations
 
@@ -156,6 +160,10 @@ class _Reader:
         return Robot(name, config, start, **limits)
 
     def scenario(self, data, name: str) -> Scenario:
+        from nonholo.formation.files import is_formation_data, read_formation
+
+        if is_formation_data(data):  # followers or posture leaders: nonholo.formation.files
+            return read_formation(self, data, name)
         data = self.table(data, "", {"simulation", "reference", "robots", "name"})
         simulation = self.table(data.get("simulation", {}), "simulation", SIMULATION_FIELDS)
         if "reference" not in data:
@@ -184,7 +192,8 @@ class _Reader:
 
 
 def parse_scenario(text: str, source: str = "<scenario>", name: str = "scenario") -> Scenario:
-    """A Scenario from TOML text; ``ScenarioError`` (one line) on any problem."""
+    """A Scenario (a ``nonholo.formation.Formation`` for formation files) from TOML text;
+    ``ScenarioError`` (one line) on any problem."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -1,0 +1,152 @@
+"""Posture stabilisers: drive a unicycle to a goal pose (x_g, y_g, θ_g) (thesis §4.10,
+Eq 4.51–4.55 and 5.11–5.14; spec follower-posture.md §5, errata 10, 11, 13, 25–29).
+
+All three laws are written for the goal at the origin with heading 0; a goal pose is
+handled by first expressing the robot in the goal frame (spec §5, not stated in the thesis):
+
+    x = cos θ_g (X − X_g) + sin θ_g (Y − Y_g),   y = −sin θ_g (X − X_g) + cos θ_g (Y − Y_g),
+    θ̃ = θ − θ_g.
+
+* ``time-varying`` (Eq 4.51 + 5.11, Samson-style, spec §5.1): the nonlinear tracking law
+  with constant gains tracks a point x_d on the goal's x-axis that keeps moving while the
+  lateral error e2 is non-zero. x_d is carried in the compensator slot ξ:
+
+      ẋ_d = −k5 x_d + g,   g = tanh(k6 e2 / 2) · sin t   (bounded, |g| ≤ 1; erratum 25)
+      v = v_d cos e3 + k1 e1,   ω = k2 v_d (sin e3 / e3) e2 + k3 e3,   v_d = ẋ_d, ω_d = 0.
+
+* ``polar`` (Aicardi et al. 1995, Eq 4.52–4.54, spec §5.2): ψ = ‖(x, y)‖,
+  φ = atan2(−y, −x), μ = wrap(φ − θ̃);  v = k1 ψ cos μ,
+  ω = k2 μ + k1 (sin μ cos μ / μ)(μ + k3 φ); v = ω = 0 once ψ < ``tolerance``.
+
+* ``dynamic-feedback-posture`` (Eq 4.55, spec §5.3): the dynamic compensator ξ = v with a
+  PD law on the goal-frame position, r1 = −kp1 x − kd1 ẋ, r2 = −kp2 y − kd2 ẏ,
+  ξ̇ = r1 cos θ̃ + r2 sin θ̃, ω = (r2 cos θ̃ − r1 sin θ̃) / ξ. ξ(0) must be non-zero (a
+  small "kick", default +0.1 m/s). Where |ξ| < ξ_min (default 1e-9 m/s) the robot does
+  not turn (ω = 0, counted as a singular sample): this happens only as it comes to rest at
+  the goal, where ω = (…)/ξ is round-off over round-off and would spin the parked robot. **The final
+  heading is not controlled by this law**: the robot arrives along the goal's x-axis,
+  heading θ_g or θ_g + π depending on the initial conditions.
+
+Signature: the tracking-law signature ``law(x, y, θ, cos θ, sin θ, ξ, ref, gains)`` of
+``nonholo.control.linearization`` with ``ref[0]`` the time and the goal in the gain
+tuple, ``gains = (x_g, y_g, θ_g, gain_1, …)``, so the formation kernel runs posture and
+tracking leaders alike.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from nonholo.control.registry import POSITIVE, GainRule, TrackingController
+from nonholo.control.tracking_errors import tracking_errors
+from nonholo.numerics import sinc_of, sincos, wrap_angle
+
+GOAL_SLOTS = 3  # x_g, y_g, θ_g precede the gains in the gain tuple
+
+
+@njit(inline="always", error_model="numpy")
+def goal_frame_pose(x, y, theta, gains):
+    """Robot pose (x, y, θ̃) in the frame of the goal (gains[0:3] = x_g, y_g, θ_g)."""
+    sin_g, cos_g = sincos(gains[2])
+    dx, dy = x - gains[0], y - gains[1]
+    return cos_g * dx + sin_g * dy, -sin_g * dx + cos_g * dy, theta - gains[2]
+
+
+@njit(inline="always", error_model="numpy")
+def excitation(e2, t, k6):
+    """g(e, t) = tanh(k6 e2 / 2) · sin t: the corrected Eq 5.11 (|g| ≤ 1, odd in e2)."""
+    return math.tanh(0.5 * k6 * e2) * math.sin(t)
+
+
+@njit(inline="always", error_model="numpy")
+def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    """Spec §5.1. ξ is x_d, the moving point on the goal's x-axis (x_d(0) = 0)."""
+    k1, k2, k3, k5, k6 = gains[3], gains[4], gains[5], gains[6], gains[7]
+    gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
+    sin_t, cos_t = sincos(gtheta)
+    # e2 does not depend on v_d: evaluate the errors once against x_d, then form v_d.
+    e1, e2, e3 = tracking_errors(gx, gy, gtheta, cos_t, sin_t, (ref[0], xi, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    v_d = -k5 * xi + excitation(e2, ref[0], k6)
+    sin_e3, cos_e3 = sincos(e3)
+    v = v_d * cos_e3 + k1 * e1
+    omega = k2 * v_d * sinc_of(e3, sin_e3) * e2 + k3 * e3
+    return v, omega, v_d, 0.0
+
+
+@njit(inline="always", error_model="numpy")
+def polar_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    """Spec §5.2 (Aicardi et al.), angles wrapped to (−π, π]; stop below the tolerance."""
+    k1, k2, k3, tolerance = gains[3], gains[4], gains[5], gains[6]
+    gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
+    psi = math.sqrt(gx * gx + gy * gy)
+    phi = math.atan2(-gy, -gx)
+    mu = wrap_angle(phi - gtheta)
+    sin_mu, cos_mu = sincos(mu)
+    v = k1 * psi * cos_mu
+    omega = k2 * mu + k1 * sinc_of(mu, sin_mu) * cos_mu * (mu + k3 * phi)
+    moving = psi >= tolerance
+    return (v if moving else 0.0), (omega if moving else 0.0), 0.0, 0.0
+
+
+@njit(inline="always", error_model="numpy")
+def dynamic_feedback_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    """Spec §5.3: PD on the goal-frame position through the compensator ξ = v."""
+    kp1, kd1, kp2, kd2, xi_min = gains[3], gains[4], gains[5], gains[6], gains[7]
+    gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
+    sin_t, cos_t = sincos(gtheta)
+    r1 = -kp1 * gx - kd1 * xi * cos_t
+    r2 = -kp2 * gy - kd2 * xi * sin_t
+    singular = abs(xi) < xi_min
+    omega = 0.0 if singular else (r2 * cos_t - r1 * sin_t) / (xi if not singular else 1.0)
+    return xi, omega, r1 * cos_t + r2 * sin_t, 1.0 if singular else 0.0
+
+
+NONZERO_KICK = GainRule(lambda g: g != 0, "!= 0 (a robot at rest is the singular point of dynamic feedback)")
+
+
+def _no_stiffness(gains, v_d, omega_d):
+    return 0.0
+
+
+POSTURE_CONTROLLERS: dict[str, TrackingController] = {c.name: c for c in (
+    TrackingController(
+        name="time-varying", title="Smooth time-varying posture feedback",
+        source="thesis Eq 4.51, 5.11-5.12; spec follower-posture.md §5.1 (errata 10, 25, 26); Samson 1993",
+        laws={"default": time_varying_posture_law}, gains=("k1", "k2", "k3", "k5", "k6"),
+        defaults={"k1": 0.5, "k2": 2.0, "k3": 1.0, "k5": 1.0, "k6": 50.0},
+        rules={g: POSITIVE for g in ("k1", "k2", "k3", "k5", "k6")},
+        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"])),
+    TrackingController(
+        name="polar", title="Polar-coordinate posture law",
+        source="thesis Eq 4.52-4.54, 5.13; spec §5.2 (errata 11, 28); Aicardi et al. 1995",
+        laws={"default": polar_posture_law}, gains=("k1", "k2", "k3", "tolerance"),
+        defaults={"k1": 1.0, "k2": 3.0, "k3": 2.0, "tolerance": 1e-9},
+        rules={g: POSITIVE for g in ("k1", "k2", "k3", "tolerance")},
+        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k2"])),
+    TrackingController(
+        name="dynamic-feedback-posture", title="Dynamic feedback linearization posture regulator",
+        source="thesis Eq 4.55, 5.14; spec §5.3 (errata 13, 29); Oriolo, De Luca & Vendittelli 2002",
+        laws={"default": dynamic_feedback_posture_law}, gains=("kp1", "kd1", "kp2", "kd2", "xi_min"),
+        defaults={"kp1": 2.0, "kd1": 3.0, "kp2": 12.0, "kd2": 7.0, "xi_min": 1e-9, "xi0": 0.1},
+        rules={g: POSITIVE for g in ("kp1", "kd1", "kp2", "kd2", "xi_min")} | {"xi0": NONZERO_KICK},
+        initial_compensator="xi0", needs_moving_reference=False,
+        stiffness=lambda g, v, w: max(g["kd1"], g["kd2"])),
+)}
+
+HEADING_CONTROLLED = {"time-varying": True, "polar": True, "dynamic-feedback-posture": False}
+
+
+def posture_controller(name: str, **gains: float):
+    """A configured posture stabiliser, e.g. ``posture_controller("polar", k2=4)``."""
+    from nonholo.errors import NonholoInputError
+
+    spec = POSTURE_CONTROLLERS.get(name)
+    if spec is None:
+        raise NonholoInputError(f"unknown posture controller {name!r} (valid: {', '.join(POSTURE_CONTROLLERS)})")
+    return spec.configure(gains)
+
+
+def initial_compensator(config) -> float:
+    """ξ(0) of a posture law: x_d(0) = 0 (time-varying), the kick speed (dynamic), 0 (polar)."""
+    return float(config.xi0) if config.controller.initial_compensator else 0.0

@@ -1,0 +1,92 @@
+"""Formation targets over time: initial targets and run-time changes (thesis Eq 5.9;
+spec follower-posture.md §2.5, erratum 22).
+
+The targets z_d(t) of a follower and their rates ż_d(t) are evaluated into a table at
+every RK4 stage time, like the leader's reference. A step switches for t > at (so the
+RK4 step that ends at ``at`` integrates the old target throughout and the first step
+after it the new one; the sample at t = at still shows the old target). A ramp follows
+the quintic smoothstep s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, τ = (t − at)/T, whose rate
+ż_d = Δ s'(τ)/T is fed forward, so the output error of an exact follower stays zero.
+
+Bearings are kept on a continuous branch: a bearing target φ_new is resolved against the
+previous target by the change's ``direction``, so that (π/3 → 4π/3, "counterclockwise")
+is the thesis's Eq 5.9 switch with the castor point passing behind the leader.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nonholo.formation.model import AMBIGUOUS_TURN, FormationError, Follower
+
+TAU = 2.0 * math.pi
+TABLE_COLUMNS = ("output_1_d", "output_2_d", "output_1_d_rate", "output_2_d_rate")
+EVENT_TOLERANCE = 1e-9
+
+
+def smoothstep(tau):
+    """s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on [0, 1] (C² ramp from 0 to 1)."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+
+
+def smoothstep_rate(tau):
+    """s'(τ) = 30τ²(1 − τ)², zero outside (0, 1)."""
+    inside = (tau > 0.0) & (tau < 1.0)
+    return np.where(inside, 30.0 * tau * tau * (1.0 - tau) ** 2, 0.0)
+
+
+def resolve_bearing(previous: float, new: float, direction: str, follower: str = "?", where: str = "phi") -> float:
+    """The value of φ_new on the 2π branch reached from ``previous`` turning in ``direction``."""
+    if direction == "counterclockwise":
+        turn = (new - previous) % TAU
+    elif direction == "clockwise":
+        turn = -((previous - new) % TAU)
+    else:
+        turn = (new - previous + math.pi) % TAU - math.pi
+        if abs(abs(turn) - math.pi) < AMBIGUOUS_TURN:
+            raise FormationError(follower, where,
+                                 f"a bearing change of ±π ({previous:.6g} -> {new:.6g} rad) is ambiguous under "
+                                 "direction = 'shortest': set direction = 'counterclockwise' (castor point passes "
+                                 "behind the leader for φ ≈ π/3) or 'clockwise', or ramp it")
+    return previous + turn
+
+
+def target_segments(follower: Follower) -> list[list[tuple[float, float, float, float]]]:
+    """Per output, the changes as (at, from, to, ramp duration) with bearings resolved."""
+    current = list(follower.targets)
+    segments: list[list[tuple[float, float, float, float]]] = [[], []]
+    for j, change in enumerate(follower.changes):
+        for output, name in enumerate(follower.outputs):
+            if name not in change.targets:
+                continue
+            new = float(change.targets[name])
+            if name == "phi":
+                new = resolve_bearing(current[output], new, change.direction, follower.name, f"changes[{j}].phi")
+            ramp = change.duration if change.mode == "ramp" else 0.0
+            segments[output].append((change.at, current[output], new, ramp))
+            current[output] = new
+    return segments
+
+
+def target_table(follower: Follower, times: np.ndarray) -> np.ndarray:
+    """(len(times), 4): output targets and their rates (``TABLE_COLUMNS``) at ``times``."""
+    times = np.asarray(times, dtype=float)
+    table = np.zeros((times.size, 4))
+    for output, segments in enumerate(target_segments(follower)):
+        value = np.full(times.size, follower.targets[output])
+        rate = np.zeros(times.size)
+        for at, start, end, ramp in segments:
+            after = times > at + EVENT_TOLERANCE * max(1.0, abs(at))
+            if ramp == 0.0:
+                value = np.where(after, end, value)
+            else:
+                tau = (times - at) / ramp
+                value = np.where(after, start + (end - start) * smoothstep(tau), value)
+                rate = rate + (end - start) * smoothstep_rate(tau) / ramp
+        table[:, output] = value
+        table[:, 2 + output] = rate
+    return table
+
+

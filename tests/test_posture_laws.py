@@ -1,0 +1,92 @@
+"""Posture stabilisers (spec follower-posture.md §5, §6 (d))."""
+import math
+
+import numpy as np
+import pytest
+
+from nonholo.control.posture import excitation, posture_controller
+from nonholo.errors import NonholoInputError
+from nonholo.formation import Formation, Leader, simulate_formation
+
+HEADINGS = np.linspace(-math.pi, math.pi, 6, endpoint=False)
+GOALS = [(0.0, 0.0, 0.0), (-10.0, 10.0, 0.0), (-14.0, -10.0, 0.5)]   # the last is behind the robot
+
+
+def batch(name, duration, goals=GOALS, headings=HEADINGS, **gains):
+    config = posture_controller(name, **gains)
+    return [Formation([Leader("robot", config, start=(-10.0, -10.0, h), goal=g)], duration=duration)
+            for g in goals for h in headings]
+
+
+def final_errors(result, formations):
+    out = []
+    for member, formation in enumerate(formations):
+        p = result.posture_metrics("robot", member)
+        out.append((p["position_error"]["final"], p["heading_error"]["final"]))
+    return np.array(out)
+
+
+def test_excitation_is_bounded_odd_and_zero_on_the_axis():
+    e2 = np.linspace(-50, 50, 2001)
+    for t in (0.3, 1.7, 4.0):
+        g = np.array([excitation.py_func(e, t, 50.0) for e in e2])
+        assert np.all(np.abs(g) <= 1.0) and np.allclose(g, -g[::-1])
+    assert excitation.py_func(0.0, 1.0, 50.0) == 0.0
+
+
+def test_polar_reaches_every_goal_from_every_heading():
+    formations = batch("polar", 40.0)
+    errors = final_errors(simulate_formation(formations), formations)
+    assert errors[:, 0].max() < 1e-8
+    assert errors[:, 1].max() < 1e-3
+
+
+def test_dynamic_feedback_reaches_every_position_heading_uncontrolled():
+    formations = batch("dynamic-feedback-posture", 40.0)
+    result = simulate_formation(formations)
+    errors = final_errors(result, formations)
+    assert errors[:, 0].max() < 1e-8
+    # the robot arrives along the goal's x-axis: heading θ_g or θ_g + π
+    assert np.all(np.minimum(errors[:, 1], np.abs(errors[:, 1] - math.pi)) < 1e-2)
+    assert result.posture_metrics("robot")["heading_controlled"] is False
+
+
+def test_time_varying_converges_slowly_from_every_heading():
+    formations = batch("time-varying", 100.0, goals=GOALS[:2], headings=HEADINGS[::2])
+    errors = final_errors(simulate_formation(formations), formations)
+    assert errors[:, 0].max() < 0.3
+    assert errors[:, 1].max() < 0.05
+
+
+@pytest.mark.parametrize("goal", [(0.0, 0.0, 0.0), (-10.0, 10.0, 0.0)])
+def test_spec_reference_numbers(goal):
+    """Spec §6 (d): start (−10, −10, 0), 60 s."""
+    runs = {name: Formation([Leader("robot", posture_controller(name), start=(-10.0, -10.0, 0.0), goal=goal)],
+                            duration=60.0) for name in ("time-varying", "polar", "dynamic-feedback-posture")}
+    results = {name: simulate_formation(f).posture_metrics("robot") for name, f in runs.items()}
+    tv = results["time-varying"]
+    assert tv["position_error"]["final"] == pytest.approx(0.0725, abs=0.004)
+    assert math.degrees(tv["heading_error"]["final"]) < 0.06
+    assert results["polar"]["position_error"]["final"] < 1e-8           # the thesis's "failure" does not occur
+    dyn = results["dynamic-feedback-posture"]
+    assert dyn["position_error"]["final"] < 1e-10
+    expected = 0.0 if goal == (0.0, 0.0, 0.0) else math.pi               # 180° for goal (−10, 10)
+    assert dyn["heading_error"]["final"] == pytest.approx(expected, abs=1e-3)
+
+
+def test_dynamic_feedback_kick_must_be_nonzero():
+    with pytest.raises(NonholoInputError, match="xi0"):
+        posture_controller("dynamic-feedback-posture", xi0=0.0)
+    minus = Formation([Leader("robot", posture_controller("dynamic-feedback-posture", xi0=-0.1),
+                              start=(-10.0, -10.0, 0.0), goal=(0.0, 0.0, 0.0))], duration=60.0)
+    metrics = simulate_formation(minus).posture_metrics("robot")
+    assert metrics["position_error"]["final"] < 1e-10
+    assert metrics["heading_error"]["final"] == pytest.approx(math.pi, abs=1e-3)   # spec: ξ(0) = −0.1 → 180°
+
+
+def test_goal_frame_translation_and_rotation():
+    """A rotated goal: polar reaches its heading too."""
+    goal = (3.0, -2.0, 2.0)
+    f = Formation([Leader("robot", posture_controller("polar"), start=(0.0, 0.0, 0.0), goal=goal)], duration=40.0)
+    p = simulate_formation(f).posture_metrics("robot")
+    assert p["position_error"]["final"] < 1e-8 and p["heading_error"]["final"] < 1e-3
