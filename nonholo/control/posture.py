@@ -77,9 +77,15 @@ def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 @njit(inline="always", error_model="numpy")
 def polar_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.2 (Aicardi et al.), angles wrapped to (−π, π]; stop below the tolerance."""
-    k1, k2, k3, tolerance = gains[3], gains[4], gains[5], gains[6]
     gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
-    psi = math.sqrt(gx * gx + gy * gy)
+    return polar_command(math.sqrt(gx * gx + gy * gy), gx, gy, gtheta, gains)
+
+
+@njit(inline="always", error_model="numpy")
+def polar_command(psi, gx, gy, gtheta, gains):
+    """(v, ω, 0, 0) of the polar law at distance ψ from the goal and goal-frame pose
+    (gx, gy, gθ): φ the direction to the goal, μ = φ − gθ."""
+    k1, k2, k3, tolerance = gains[3], gains[4], gains[5], gains[6]
     phi = math.atan2(-gy, -gx)
     mu = wrap_angle(phi - gtheta)
     sin_mu, cos_mu = sincos(mu)
