@@ -28,3 +28,8 @@ class ExpressionError(NonholoInputError):
 
 class InfeasibleReferenceError(NonholoInputError):
     """A reference the chosen controller cannot track (for example v_d = 0)."""
+
+
+class SimulationError(RuntimeError):
+    """A simulation that could not produce finite results (for example a law driven
+    unstable by too large a step). The CLI prints it on one line and exits with code 1."""

@@ -90,6 +90,26 @@ def test_approximate_linearization_places_the_frozen_time_poles(v_d, omega_d):
     assert np.allclose(np.sort_complex(np.linalg.eigvals(jac)), expected, atol=1e-6)
 
 
+@pytest.mark.parametrize("variant", ["linear", "sine"])
+@pytest.mark.parametrize("v_d, omega_d", [(1.0, 0.3), (0.5, -0.8)])
+def test_cascaded_error_dynamics_have_the_designed_structure(variant, v_d, omega_d):
+    """Spec §3.3: linearized at e = 0 the heading loop is ė3 = −c1 e3 and the position
+    errors obey λ² + c2 λ + (1 + c3) ω_d² (the cross-track error corrected only through ω_d)."""
+    c1, c2, c3 = 216.9, 1.355, -0.414
+    law = CONTROLLERS["cascaded"].laws[variant].py_func
+    ref_row = np.array([0, 0, 0, v_d, 0, 0, 0, 0, v_d, omega_d], dtype=float)
+
+    def error_rates(e):
+        x, y, th = pose_from_errors(ref_row, *e)
+        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, tuple(ref_row), (c1, c2, c3))
+        return np.array([w * e[1] - v + v_d * math.cos(e[2]), -w * e[0] + v_d * math.sin(e[2]), omega_d - w])
+
+    jac = np.column_stack([(error_rates(h) - error_rates(-h)) / 2e-7 for h in np.eye(3) * 1e-7])
+    assert np.allclose(jac[2], [0, 0, -c1], atol=1e-6)  # decoupled heading loop
+    position = jac[:2, :2]
+    assert np.allclose(np.poly(position), [1, c2, (1 + c3) * omega_d**2], atol=1e-6)
+
+
 def test_nonlinear_law_lyapunov_function_decreases():
     """Spec §3.2: V = (b/2)(e1² + e2²) + e3²/2 is non-increasing along the closed loop."""
     ref = references.circle()

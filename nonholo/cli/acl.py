@@ -9,7 +9,7 @@ import argparse
 import json
 import sys
 
-EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT = 0, 1, 2
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

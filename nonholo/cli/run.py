@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_OK
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
 
 
 def register(subparsers) -> None:
@@ -27,7 +27,7 @@ def register(subparsers) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from nonholo import examples
-    from nonholo.errors import NonholoInputError
+    from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.sim.files import load_scenario
 
     try:
@@ -46,13 +46,20 @@ def handle(args: argparse.Namespace) -> int:
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except SimulationError as exc:
+        print(f"nonholo run: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     summary = result.to_dict()
-    if args.plot:
-        result.plot(path=args.plot)
-    if args.out:
-        write_outputs(result, summary, Path(args.out))
-        if _is_formation(scenario):
-            result.write_gif(Path(args.out) / "formation.gif")
+    try:
+        if args.plot:
+            result.plot(path=args.plot)
+        if args.out:
+            write_outputs(result, summary, Path(args.out))
+            if _is_formation(scenario):
+                result.write_gif(Path(args.out) / "formation.gif")
+    except (OSError, ValueError) as exc:  # unwritable place, unknown image format
+        print(f"nonholo run: cannot write the outputs: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     if args.json:
         json.dump(summary, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

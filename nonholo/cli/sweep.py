@@ -33,13 +33,18 @@ def handle(args: argparse.Namespace) -> int:
     from nonholo import examples
     from nonholo.errors import NonholoInputError
     from nonholo.sim.files import load_scenario
+    from nonholo.sim.scenario import Scenario
     from nonholo.studies.sweep import GainAxis, run_sweep
 
     try:
         axes = [GainAxis.parse(text) for text in args.gain]
         if args.steps is not None and args.steps < 1:
             raise NonholoInputError(f"--steps must be a positive integer, got {args.steps}")
-        result = run_sweep(load_scenario(examples.resolve(args.scenario)), axes, robot=args.robot, metric=args.metric,
+        scenario = load_scenario(examples.resolve(args.scenario))
+        if not isinstance(scenario, Scenario):
+            raise NonholoInputError(f"{args.scenario}: sweeps take leader-only scenarios (no followers or posture "
+                                    "leaders)")
+        result = run_sweep(scenario, axes, robot=args.robot, metric=args.metric,
                            steps=args.steps, progress=False if args.quiet else None)
     except NonholoInputError as exc:
         print(f"nonholo sweep: {exc}", file=sys.stderr)
@@ -49,10 +54,14 @@ def handle(args: argparse.Namespace) -> int:
         return EXIT_FAILURE
     if args.out:
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        result.write_csv(out / "sweep.csv")
-        result.write_json(out / "sweep.json")
-        result.plot(out / "sweep.png")
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            result.write_csv(out / "sweep.csv")
+            result.write_json(out / "sweep.json")
+            result.plot(out / "sweep.png")
+        except OSError as exc:
+            print(f"nonholo sweep: cannot write the outputs: {exc}", file=sys.stderr)
+            return EXIT_FAILURE
     if args.json:
         json.dump(result.to_dict(), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")

@@ -4,6 +4,7 @@ admissible ranges. A ``TrackingController`` describes a family of laws; a
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -72,7 +73,7 @@ class TrackingController:
             if name not in self.accepted_gains:
                 raise NonholoInputError(
                     f"unknown gain {name!r} for {self.name} (gains: {', '.join(self.accepted_gains)})")
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
                 raise NonholoInputError(f"gain {name!r} of {self.name} must be a finite number, got {value!r}")
         for alias, targets in self.aliases.items():
             if alias in gains:

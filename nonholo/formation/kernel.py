@@ -33,6 +33,7 @@ from nonholo.models.formation_kinematics import separation_bearing_rates, separa
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.numerics import sincos, wrap_angle
 from nonholo.sim.kernel import row_values, stable_cache_identity
+from nonholo.sim.kernel import saturate as saturate_commands
 
 LEADER, SEPARATION_BEARING, SEPARATION_SEPARATION = 0, 1, 2
 LEADER_GAINS = 8
@@ -53,9 +54,8 @@ def leader_gains_of(gains, r, b):
 @njit(inline="always", **_OPTIONS)
 def saturate(v_raw, omega_raw, v_max, omega_max):
     """Clipped (v, ω) and a flag: 1 if v was clipped, 2 if ω, 3 if both."""
-    v = min(max(v_raw, -v_max), v_max)
-    omega = min(max(omega_raw, -omega_max), omega_max)
-    return v, omega, (1.0 if v != v_raw else 0.0) + (2.0 if omega != omega_raw else 0.0)
+    v, omega, saturated_v, saturated_omega = saturate_commands(v_raw, omega_raw, v_max, omega_max)
+    return v, omega, saturated_v + 2.0 * saturated_omega
 
 
 @njit(inline="always", **_OPTIONS)

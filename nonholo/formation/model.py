@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from nonholo.sim.scenario import MAX_STEPS
 from nonholo.control.registry import ControllerConfig
 from nonholo.errors import NonholoInputError
 from nonholo.formation.geometry import place_follower, pose_in_frame
@@ -149,6 +150,9 @@ class Formation:
         object.__setattr__(self, "duration", float(duration))
         if not (math.isfinite(self.dt) and 0 < self.dt <= self.duration):
             raise FormationError(None, "dt", f"must be in (0, duration], got {self.dt!r}")
+        if self.duration / self.dt > MAX_STEPS:
+            raise FormationError(None, "dt", f"{self.dt:g} s gives {self.duration / self.dt:.3g} steps (at most "
+                                 f"{MAX_STEPS:g}): use a larger dt")
         if self.method not in ("rk4", "solve_ivp"):
             raise FormationError(None, "method", f"unknown method {self.method!r} (valid: rk4, solve_ivp)")
         if self.substeps is not None and not (isinstance(self.substeps, int) and self.substeps >= 1):

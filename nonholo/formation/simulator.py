@@ -20,20 +20,18 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from nonholo.control.posture import initial_compensator
-from nonholo.errors import InfeasibleReferenceError, NonholoInputError
+from nonholo.errors import NonholoInputError, SimulationError
 from nonholo.formation import kernel as fk
 from nonholo.formation.geometry import separation_bearing, wrap
 from nonholo.formation.model import SEPARATION_BEARING, Follower, Formation, Leader
 from nonholo.formation.result import FormationResult
 from nonholo.formation.schedule import target_table
 from nonholo.references.feedforward import REF_OMEGA, REF_V
-from nonholo.sim.simulator import stage_times
+from nonholo.sim.simulator import (MAX_SUBSTEPS, SOLVE_IVP_TOLERANCE, SURVEY_POINTS, compensator_start,
+                                    stage_times)
 
 RATE_STEP = 0.05
-MAX_SUBSTEPS = 1000
 PLAN_ITERATIONS = 6
-SURVEY_POINTS = 2001
-SOLVE_IVP_TOLERANCE = 1e-10
 
 
 @cache
@@ -121,13 +119,8 @@ class Packed:
                 config = robot.controller
                 if robot.posture:
                     self.state[3, i, b] = initial_compensator(config)
-                elif config.controller.initial_compensator:
-                    xi0 = config.xi0 if config.xi0 is not None else float(first_row[REF_V])
-                    if abs(xi0) < 1e-9:
-                        raise InfeasibleReferenceError(
-                            f"robot {robot.name!r}: xi0 defaults to v_d(0) = {xi0:.3g}, the singular point of "
-                            "dynamic feedback; set gains.xi0 to a small non-zero speed")
-                    self.state[3, i, b] = xi0
+                else:
+                    self.state[3, i, b] = compensator_start(robot.name, config, float(first_row[REF_V]))
 
     def initial_branches(self, first_targets: np.ndarray) -> np.ndarray:
         """Each l–φ bearing at t = 0 on the 2π branch nearest its target φ_d(0)."""
@@ -168,6 +161,12 @@ def simulate_formation(formation: Formation | list[Formation]) -> FormationResul
         plan = np.ones(n_steps, dtype=np.int64)
     else:
         record, plan = _rk4(packed, integrate, first, grid, branch0, record_shape)
+    states = record[fk.REC_X:fk.REC_OMEGA + 1]
+    finite = np.isfinite(states).all(axis=(0, 1, 3))
+    if not finite.all():
+        names = [robot.name for robot, ok in zip(first.robots, finite) if not ok]
+        raise SimulationError(f"the simulation of robot(s) {', '.join(map(repr, names))} diverged (non-finite "
+                              "state): lower the gains or the step (dt), or check the formation's geometry")
     return FormationResult(formations=formations, t=grid, record=record,
                            reference_rows=None if packed.posture else packed.reference_rows(grid),
                            substeps=plan, elapsed_s=time.perf_counter() - started)

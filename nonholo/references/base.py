@@ -79,6 +79,8 @@ class Reference(ABC):
 
     def check_speed(self, t0: float, t1: float, who: str = "this controller") -> None:
         """Raise ``InfeasibleReferenceError`` naming the times where v_d vanishes."""
+        if self.speed(np.linspace(t0, t1, 101)).max() < 1e-12:
+            raise InfeasibleReferenceError(f"the reference does not move on [{t0:g}, {t1:g}] s: {who} needs v_d != 0")
         zeros = self.vanishing_speed_times(t0, t1)
         if zeros:
             shown = ", ".join(f"t = {z:.6g} s" for z in zeros[:5])

@@ -13,6 +13,14 @@ def _number(value) -> sp.Expr:
     return value if isinstance(value, sp.Basic) else sp.Float(value)
 
 
+def _period(name: str, value) -> sp.Expr:
+    """A period or speed scale: finite and positive (a zero period has no reference)."""
+    number = _number(value)
+    if not (number.is_finite and number.is_positive):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    return number
+
+
 class ThesisReference(ExpressionReference):
     """An ExpressionReference that reports its kind and named parameters."""
 
@@ -29,7 +37,8 @@ def eight(amplitude_x=10, amplitude_y=10, period_x=40 * sp.pi, period_y=80 * sp.
           direction: int = FORWARD) -> ThesisReference:
     """Test 1, figure eight: x_d = A_x sin(2πt/T_x), y_d = A_y sin(2πt/T_y)
     (thesis: 10 sin(t/20), 10 sin(t/40); one cycle in 80π ≈ 251.33 s)."""
-    ax, ay, tx, ty = map(_number, (amplitude_x, amplitude_y, period_x, period_y))
+    ax, ay = map(_number, (amplitude_x, amplitude_y))
+    tx, ty = _period("period_x", period_x), _period("period_y", period_y)
     x = ax * sp.sin(2 * sp.pi * T / tx)
     y = ay * sp.sin(2 * sp.pi * T / ty)
     params = {"amplitude_x": ax, "amplitude_y": ay, "period_x": tx, "period_y": ty}
@@ -46,7 +55,7 @@ def line(speed=1, heading=sp.pi / 2, start=(0, 0), direction: int = FORWARD) -> 
 
 def sinusoid(speed=1, amplitude=10, period=2 * sp.pi, direction: int = FORWARD) -> ThesisReference:
     """Test 3, sinusoid: x_d = speed·t, y_d = A sin(2πt/T) (thesis: (t, 10 sin t), T = 1000 s)."""
-    s, a, p = map(_number, (speed, amplitude, period))
+    s, a, p = _number(speed), _number(amplitude), _period("period", period)
     params = {"speed": s, "amplitude": a, "period": p}
     return ThesisReference("sinusoid", s * T, a * sp.sin(2 * sp.pi * T / p), params, 1000, direction)
 
@@ -54,7 +63,8 @@ def sinusoid(speed=1, amplitude=10, period=2 * sp.pi, direction: int = FORWARD) 
 def circle(radius=10, period=40 * sp.pi, center=(0, 0), direction: int = FORWARD) -> ThesisReference:
     """Test 4, circle: p_d = center + R (cos 2πt/T, sin 2πt/T), counter-clockwise
     (thesis: 10 (cos t/20, sin t/20), one lap in 40π ≈ 125.66 s)."""
-    r, p, cx, cy = map(_number, (radius, period, *center))
+    r, cx, cy = map(_number, (radius, *center))
+    p = _period("period", period)
     phase = 2 * sp.pi * T / p
     params = {"radius": r, "period": p, "center_x": cx, "center_y": cy}
     return ThesisReference("circle", cx + r * sp.cos(phase), cy + r * sp.sin(phase), params, p, direction)

@@ -72,15 +72,23 @@ def row_values(rows, r):
 
 
 @njit(inline="always", **_OPTIONS)
+def saturate(v_raw, omega_raw, v_max, omega_max):
+    """Actuator limits: clipped (v, ω) and 1.0 flags where each limit acted. abs(nan) >
+    limit is False: a non-finite command is not "saturation" (the simulator reports
+    divergence separately)."""
+    v = min(max(v_raw, -v_max), v_max)
+    omega = min(max(omega_raw, -omega_max), omega_max)
+    return v, omega, 1.0 if abs(v_raw) > v_max else 0.0, 1.0 if abs(omega_raw) > omega_max else 0.0
+
+
+@njit(inline="always", **_OPTIONS)
 def command_at(law, x, y, theta, xi, ref, gains_i, v_max, omega_max):
     """Saturated law output and its flags at one state: (v, ω, ξ̇, singular,
     v saturated, ω saturated, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
     v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains_i)
-    v = min(max(v_raw, -v_max), v_max)
-    omega = min(max(omega_raw, -omega_max), omega_max)
-    return (v, omega, xi_dot, singular, 1.0 if v != v_raw else 0.0, 1.0 if omega != omega_raw else 0.0,
-            cos_t, sin_t)
+    v, omega, saturated_v, saturated_omega = saturate(v_raw, omega_raw, v_max, omega_max)
+    return v, omega, xi_dot, singular, saturated_v, saturated_omega, cos_t, sin_t
 
 
 @njit(inline="always", **_OPTIONS)

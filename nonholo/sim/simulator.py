@@ -15,8 +15,8 @@ from functools import cache
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo.control.registry import CONTROLLERS, TrackingController
-from nonholo.errors import InfeasibleReferenceError, NonholoInputError
+from nonholo.control.registry import CONTROLLERS, ControllerConfig, TrackingController
+from nonholo.errors import InfeasibleReferenceError, NonholoInputError, SimulationError
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats
 from nonholo.sim.result import SimulationResult
@@ -29,6 +29,8 @@ STABLE_STEP_FACTOR = 0.5
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
 MAX_SUBSTEPS = 1000
+# RK4 is stable for a linear mode of rate λ while h·λ < 2.785 (real axis).
+RK4_STABILITY_LIMIT = 2.78
 # The reference is surveyed at this many points to size the sub-steps.
 SURVEY_POINTS = 2001
 # Above this many robot-sub-steps a run is split into chunks with a progress bar.
@@ -47,12 +49,19 @@ def _substep_plan(scenario: Scenario, stiffness: float) -> tuple[int, int, int]:
     if scenario.method != "rk4":
         return 1, 1, 0
     if scenario.substeps is not None:
+        step = scenario.dt / scenario.substeps
+        if stiffness * step > RK4_STABILITY_LIMIT:
+            raise NonholoInputError(
+                f"substeps = {scenario.substeps} is unstable for this law: its fastest rate {stiffness:.3g} 1/s times "
+                f"the step {step:.3g} s exceeds RK4's stability limit {RK4_STABILITY_LIMIT}; use more substeps or "
+                "leave them automatic")
         return scenario.substeps, scenario.substeps, 0
-    base = max(1, math.ceil(stiffness * scenario.dt / STABLE_STEP_FACTOR))
-    if base > MAX_SUBSTEPS:
+    needed = stiffness * scenario.dt / STABLE_STEP_FACTOR
+    if not needed <= MAX_SUBSTEPS:  # also catches inf and nan
         raise NonholoInputError(
             f"the control law is too stiff for dt = {scenario.dt:g} s (fastest rate {stiffness:.3g} 1/s would need "
-            f"{base} sub-steps per step): reduce dt or lower the gains")
+            f"{needed:.3g} sub-steps per step, at most {MAX_SUBSTEPS}): reduce dt or lower the gains")
+    base = max(1, math.ceil(needed))
     if base == 1:
         return 1, 1, 0
     return base, base * STARTUP_REFINEMENT, math.ceil(STARTUP_TIME_CONSTANTS / stiffness / scenario.dt)
@@ -80,6 +89,14 @@ def stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return times, row_start
 
 
+def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
+    bad = ~np.isfinite(rows).all(axis=1)
+    if bad.any():
+        raise InfeasibleReferenceError(
+            f"the {scenario.reference.kind} reference is not finite at t = {rows[np.argmax(bad), 0]:.6g} s "
+            "(position or its first two derivatives): use a formula defined and smooth over the whole run")
+
+
 def _check_reference(scenario: Scenario, controller: TrackingController, rows: np.ndarray) -> None:
     if not controller.needs_moving_reference:
         return
@@ -88,19 +105,23 @@ def _check_reference(scenario: Scenario, controller: TrackingController, rows: n
         scenario.reference.check_speed(0.0, rows[-1, 0], who=f"the {controller.name} controller")
 
 
+def compensator_start(name: str, config: ControllerConfig, v_d0: float) -> float:
+    """ξ(0) of a tracking law: the given ``xi0``, else the reference speed v_d(0) (spec
+    §3.6); 0 for laws without a compensator."""
+    if not config.controller.initial_compensator:
+        return 0.0
+    if config.xi0 is not None:
+        return config.xi0
+    if abs(v_d0) < 1e-9:
+        raise InfeasibleReferenceError(
+            f"robot {name!r}: xi0 defaults to v_d(0) = {v_d0:.3g}, the singular point of dynamic feedback; "
+            "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
+    return v_d0
+
+
 def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.ndarray:
-    state = np.array([[*r.start, 0.0] for r in robots], dtype=float).T.copy()
-    for i, robot in enumerate(robots):
-        if robot.controller.controller.initial_compensator:
-            xi0 = robot.controller.xi0
-            if xi0 is None:
-                xi0 = float(config_rows[0, REF_V])
-                if abs(xi0) < 1e-9:
-                    raise InfeasibleReferenceError(
-                        f"robot {robot.name!r}: xi0 defaults to v_d(0) = {xi0:.3g}, the singular point of dynamic feedback; "
-                        "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
-            state[3, i] = xi0
-    return state
+    v_d0 = float(config_rows[0, REF_V])
+    return np.array([[*r.start, compensator_start(r.name, r.controller, v_d0)] for r in robots], dtype=float).T.copy()
 
 
 def _group_robots(scenario: Scenario, v_peak: float, omega_peak: float) -> dict:
@@ -130,6 +151,7 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
     stats = np.empty((STAT_COUNT, n_robots))
     record_array = np.empty((6, n_steps + 1 if record else 0, n_robots))
     substeps = np.empty(n_robots, dtype=np.int64)
+    _check_finite(scenario, survey)
     rows_by_plan: dict[tuple, tuple] = {}
     for controller_name in dict.fromkeys(r.controller.name for r in scenario.robots):
         _check_reference(scenario, CONTROLLERS[controller_name], survey)
@@ -139,6 +161,7 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
         if plan_key not in rows_by_plan:
             times, row_start = stage_times(scenario.dt, plan)
             rows_by_plan[plan_key] = (scenario.reference.table(times), row_start)
+            _check_finite(scenario, rows_by_plan[plan_key][0])
         rows, row_start = rows_by_plan[plan_key]
         if grid_rows is None:  # every plan has a row at each t_k
             stride = row_start[1] - row_start[0]
@@ -157,7 +180,9 @@ def simulate(scenario: Scenario, record: bool = True, progress: bool | None = No
             _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, group_stats, group_record,
                      progress)
         else:
-            _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, group_stats, group_record)
+            _run_solve_ivp(law_rates, score, scenario, robots, state, gains, limits, grid_rows, group_stats,
+                           group_record)
+        _check_diverged(robots, group_stats)
         stats[:, members] = group_stats
         record_array[:, :, members] = group_record
         substeps[members] = plan.max()
@@ -191,7 +216,16 @@ SOLVE_IVP_TOLERANCE = 1e-10
 STIFF_RATE = 50.0
 
 
-def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, stats, record):
+def _check_diverged(robots, stats: np.ndarray) -> None:
+    diverged = [r.name for r, ok in zip(robots, np.isfinite(stats[:STAT_COUNT - 1]).all(axis=0)) if not ok]
+    if diverged:
+        shown = ", ".join(repr(name) for name in diverged[:5]) + (" …" if len(diverged) > 5 else "")
+        raise SimulationError(
+            f"the simulation of robot(s) {shown} diverged (non-finite state): reduce dt, set more substeps or "
+            "check the gains and actuator limits")
+
+
+def _run_solve_ivp(law_rates, score, scenario, robots, state, gains, limits, grid_rows, stats, record):
     """scipy cross-check: DOP853 (Radau for stiff laws), rtol = atol = 1e-10, dense output
     sampled on the same grid and scored by the same compiled code."""
     n = state.shape[1]
@@ -203,7 +237,7 @@ def _run_solve_ivp(law_rates, score, scenario, state, gains, limits, grid_rows, 
         return rates.ravel().copy()
 
     v_peak, omega_peak = np.abs(grid_rows[:, REF_V]).max(), np.abs(grid_rows[:, REF_OMEGA]).max()
-    stiffness = max(r.controller.stiffness(v_peak, omega_peak) for r in scenario.robots)
+    stiffness = max(r.controller.stiffness(v_peak, omega_peak) for r in robots)
     method = "Radau" if stiffness > STIFF_RATE else "DOP853"
     solution = solve_ivp(rhs, (0.0, grid_rows[-1, 0]), state.ravel(), method=method, t_eval=grid_rows[:, 0],
                          rtol=SOLVE_IVP_TOLERANCE, atol=SOLVE_IVP_TOLERANCE)

@@ -29,6 +29,8 @@ from nonholo.sim.simulator import simulate
 
 METRICS = ("mean", "rms", "max", "final")
 
+# A grid axis beyond this is a typo, not a study: 10⁵ × 10⁵ robots would never finish.
+MAX_AXIS_POINTS = 100_000
 # Trend classification (see classify_trend): a step between neighbouring grid points counts
 # only if it exceeds this fraction of the metric's range over the sweep, and a metric that
 # varies by less than FLAT_FRACTION of its largest value has "no effect".
@@ -47,8 +49,8 @@ class GainAxis:
 
     @classmethod
     def linear(cls, name: str, start: float, stop: float, count: int) -> "GainAxis":
-        if count < 1:
-            raise NonholoInputError(f"gain {name!r}: COUNT must be at least 1, got {count}")
+        if not 1 <= count <= MAX_AXIS_POINTS:
+            raise NonholoInputError(f"gain {name!r}: COUNT must be from 1 to {MAX_AXIS_POINTS}, got {count}")
         if not (math.isfinite(start) and math.isfinite(stop)):
             raise NonholoInputError(f"gain {name!r}: START and STOP must be finite numbers")
         return cls(name, np.linspace(start, stop, count))
