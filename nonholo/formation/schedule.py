@@ -2,9 +2,11 @@
 spec follower-posture.md §2.5, erratum 22).
 
 The targets z_d(t) of a follower and their rates ż_d(t) are evaluated into a table at
-every RK4 stage time, like the leader's reference. A step switches for t > at (so the
-RK4 step that ends at ``at`` integrates the old target throughout and the first step
-after it the new one; the sample at t = at still shows the old target). A ramp follows
+every RK4 stage time, like the leader's reference. A step switches for t > at: the RK4
+step that ends at ``at`` integrates the old target throughout, the sample at t = at still
+shows it, and so does the first stage (t = at itself) of the step that starts there; its
+other three stages see the new target. (Thesis Eq 5.9 with dt = 0.01 s: the error just
+after the switch is 0.005 rad off an ideal step; a ramp has no such effect.) A ramp follows
 the quintic smoothstep s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, τ = (t − at)/T, whose rate
 ż_d = Δ s'(τ)/T is fed forward, so the output error of an exact follower stays zero.
 
