@@ -104,6 +104,7 @@ def dynamic_feedback_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gai
     r1 = -kp1 * gx - kd1 * xi * cos_t
     r2 = -kp2 * gy - kd2 * xi * sin_t
     singular = abs(xi) < xi_min
+    # Both sides of the select are computed in SIMD code: divide by 1 where ξ ≈ 0.
     omega = 0.0 if singular else (r2 * cos_t - r1 * sin_t) / (xi if not singular else 1.0)
     return xi, omega, r1 * cos_t + r2 * sin_t, 1.0 if singular else 0.0
 

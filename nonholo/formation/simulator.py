@@ -187,10 +187,9 @@ def _rk4(packed: Packed, integrate, first: Formation, grid, branch0, record_shap
         state, branch = packed.state.copy(), branch0.copy()
         record = np.empty(record_shape)
         step_rate = np.zeros(n_steps + 1)
-        with np.errstate(all="ignore"):
-            integrate(state, branch, rows, targets, row_start, plan, dt, packed.order, packed.kinds, packed.parents,
-                      packed.leader_gains, packed.params, packed.limits, first.sin_floor, packed.xi_speed, record,
-                      step_rate, 0, n_steps, n_steps)
+        integrate(state, branch, rows, targets, row_start, plan, dt, packed.order, packed.kinds, packed.parents,
+                  packed.leader_gains, packed.params, packed.limits, first.sin_floor, packed.xi_speed, record,
+                  step_rate, 0, n_steps, n_steps)
         if first.substeps is not None:
             break
         needed = needed_substeps(step_rate, floor_rate, dt)
