@@ -6,7 +6,6 @@ import json
 import math
 import re
 import struct
-from html.parser import HTMLParser
 
 import numpy as np
 import pytest
@@ -18,6 +17,7 @@ from nonholo.formation import (Change, Formation, Leader, link_state, separation
 from nonholo.studies import StudyOptions, discover, run_studies
 from nonholo.studies import formation as fs
 from nonholo.studies import posture as ps
+from tests.conftest import ReportPage
 
 TEST1_START = (0.0, 0.0, math.atan2(0.25, 0.5))
 
@@ -201,29 +201,9 @@ def test_literal_excitation_overflows():
 
 # ------------------------------------------------------------------ report files
 
-class _Page(HTMLParser):
-    def __init__(self):
-        super().__init__()
-        self.images, self.links, self.sections, self.text = [], [], [], []
-
-    def handle_starttag(self, tag, attrs):
-        attrs = dict(attrs)
-        if tag == "img":
-            self.images.append(attrs["src"])
-        elif tag == "a" and not attrs["href"].startswith("#"):
-            self.links.append(attrs["href"])
-        elif tag == "section":
-            self.sections.append(attrs["id"])
-
-    def handle_data(self, data):
-        self.text.append(data)
-
-
 def test_report_files_are_valid(quick_report):
     results, page = quick_report
-    parser = _Page()
-    parser.feed(page.read_text(encoding="utf-8"))
-    parser.close()
+    parser = ReportPage(page.read_text(encoding="utf-8"))
     assert parser.sections == ["formation", "posture"]
     assert "".join(parser.text).count("Differences from the thesis") == 2
     pngs = [src for src in parser.images if src.endswith(".png")]

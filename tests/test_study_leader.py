@@ -6,7 +6,6 @@ import json
 import math
 import re
 import struct
-from html.parser import HTMLParser
 
 import pytest
 
@@ -14,6 +13,7 @@ import nonholo as nh
 from nonholo.studies import StudyOptions, discover, run_studies
 from nonholo.studies import thesis_values as thesis
 from nonholo.studies.leader import CONTROLLERS, EXAMPLES, LABELS, log_ratio
+from tests.conftest import ReportPage
 
 SPEC_LABELS = {"approx. lin.": "approximate-linearization", "nonlinear": "nonlinear", "cascaded": "cascaded",
                "stable tracking": "kanayama", "dynamic FL": "dynamic-feedback"}
@@ -137,29 +137,9 @@ def test_findings_follow_the_numbers(study):
     assert inconsistent == ["Thesis Table 5.2, dynamic FL", "Thesis Table 5.5, nonlinear"]
 
 
-class _Page(HTMLParser):
-    def __init__(self):
-        super().__init__()
-        self.images, self.links, self.tables, self.text = [], [], 0, []
-
-    def handle_starttag(self, tag, attrs):
-        attrs = dict(attrs)
-        if tag == "img":
-            self.images.append(attrs["src"])
-        elif tag == "a" and not attrs["href"].startswith("#"):
-            self.links.append(attrs["href"])
-        elif tag == "table":
-            self.tables += 1
-
-    def handle_data(self, data):
-        self.text.append(data)
-
-
 def test_report_files_are_valid(study):
     result, page = study
-    parser = _Page()
-    parser.feed(page.read_text(encoding="utf-8"))
-    parser.close()
+    parser = ReportPage(page.read_text(encoding="utf-8"))
     assert parser.tables == 5  # Tables 5.2-5.5 and 5.6
     assert "Differences from the thesis" in "".join(parser.text)
     assert len(parser.images) == 10

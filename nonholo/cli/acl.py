@@ -54,11 +54,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bench.set_defaults(handler=_bench)
 
 
-def _read_input(path: str) -> bytes:
+def _read_input(path: str, command: str) -> bytes | None:
+    """The bytes of ``path`` (``-``: standard input), or None after a one-line error."""
     if path == "-":
         return sys.stdin.buffer.read()
-    with open(path, "rb") as handle:
-        return handle.read()
+    try:
+        with open(path, "rb") as handle:
+            return handle.read()
+    except OSError as exc:
+        print(f"nonholo acl {command}: cannot read {path}: {exc.strerror}", file=sys.stderr)
+        return None
 
 
 def _parse(args: argparse.Namespace) -> int:
@@ -66,10 +71,8 @@ def _parse(args: argparse.Namespace) -> int:
     from nonholo.comm.errors import ACLParseError
     from nonholo.comm.json_form import message_to_json
 
-    try:
-        data = _read_input(args.file)
-    except OSError as exc:
-        print(f"nonholo acl parse: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+    data = _read_input(args.file, "parse")
+    if data is None:
         return EXIT_BAD_INPUT
     try:
         message = decode(data, max_depth=args.max_depth, max_size=args.max_size)
@@ -89,10 +92,8 @@ def _encode(args: argparse.Namespace) -> int:
     from nonholo.comm.errors import CommError
     from nonholo.comm.json_form import message_from_json
 
-    try:
-        data = _read_input(args.file)
-    except OSError as exc:
-        print(f"nonholo acl encode: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+    data = _read_input(args.file, "encode")
+    if data is None:
         return EXIT_BAD_INPUT
     try:
         message = message_from_json(json.loads(data))
