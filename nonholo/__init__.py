@@ -10,14 +10,15 @@ __version__ = "0.1.0"
 
 from nonholo import references  # noqa: E402
 from nonholo.control.registry import CONTROLLERS, controller  # noqa: E402
-from nonholo.errors import (ExpressionError, InfeasibleReferenceError, NonholoInputError,  # noqa: E402
-                            ScenarioError)
+from nonholo.errors import (ExpressionError, FormationError, InfeasibleReferenceError,  # noqa: E402
+                            NonholoInputError, ScenarioError, SimulationError)
 from nonholo.sim.files import load_scenario, parse_scenario  # noqa: E402
 from nonholo.sim.result import SimulationResult  # noqa: E402
-from nonholo.sim.scenario import Robot, Scenario  # noqa: E402
+from nonholo.sim.scenario import Change, Follower, Robot, Scenario, separation_bearing, separation_separation  # noqa: E402
 from nonholo.sim.simulator import simulate  # noqa: E402
 
 __all__ = [
-    "CONTROLLERS", "ExpressionError", "InfeasibleReferenceError", "NonholoInputError", "Robot", "Scenario",
-    "ScenarioError", "SimulationResult", "controller", "load_scenario", "parse_scenario", "references", "simulate",
+    "CONTROLLERS", "Change", "ExpressionError", "Follower", "FormationError", "InfeasibleReferenceError",
+    "NonholoInputError", "Robot", "Scenario", "ScenarioError", "SimulationError", "SimulationResult", "controller",
+    "load_scenario", "parse_scenario", "references", "separation_bearing", "separation_separation", "simulate",
 ]

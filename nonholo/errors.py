@@ -33,3 +33,13 @@ class InfeasibleReferenceError(NonholoInputError):
 class SimulationError(RuntimeError):
     """A simulation that could not produce finite results (for example a law driven
     unstable by too large a step). The CLI prints it on one line and exits with code 1."""
+
+
+class FormationError(NonholoInputError):
+    """A scenario (robot graph) that cannot be simulated; ``robot`` and ``field`` locate the
+    problem (the scenario reader turns them into ``robots[i].field`` or ``simulation.field``)."""
+
+    def __init__(self, robot: str | None, field: str, problem: str):
+        self.robot, self.field, self.problem = robot, field, problem
+        where = f"robot {robot!r}: {field}: " if robot is not None else (f"{field}: " if field else "")
+        super().__init__(f"{where}{problem}")

@@ -1,4 +1,5 @@
 """Formation/posture scenario files, bad-file errors and ``nonholo run`` output."""
+import nonholo as nh
 import json
 import math
 
@@ -36,7 +37,7 @@ def test_parses_followers_changes_and_angles():
     text = HEAD + follower(extra='start_relative = [-4, 0, 0]\n[[robots.changes]]\nat = 2\nphi = "4*pi/3"\n'
                                  'direction = "counterclockwise"')
     formation = parse_scenario(text, "f.toml")
-    assert isinstance(formation, Formation)
+    assert isinstance(formation, nh.Scenario) and formation.followers
     f1 = formation.robot("f1")
     assert f1.targets == (2.0, pytest.approx(math.pi / 3)) and f1.start_frame == "leader"
     assert f1.changes[0].targets["phi"] == pytest.approx(4 * math.pi / 3)

@@ -7,7 +7,7 @@ import pytest
 from nonholo import controller, references
 from nonholo.formation import (Change, Formation, FormationError, Leader, link_state, place_follower,
                                separation_bearing, separation_separation, simulate_formation)
-from nonholo.formation.laws import separation_bearing_law, separation_separation_law
+from nonholo.control.formation import separation_bearing_law, separation_separation_law
 from nonholo.models.formation_kinematics import bearing_rate, separation_rate
 
 TEST1_START = (0.0, 0.0, math.atan2(0.25, 0.5))

@@ -32,17 +32,10 @@ def handle(args: argparse.Namespace) -> int:
 
     try:
         scenario = load_scenario(examples.resolve(args.scenario))
-        if _is_formation(scenario):
-            from nonholo.formation import simulate_formation
-            from nonholo.formation.report import format_formation_summary
+        from nonholo.sim.simulator import simulate
 
-            result, formatter = simulate_formation(scenario), format_formation_summary
-        else:
-            from nonholo.sim.simulator import simulate
-
-            result = simulate(scenario, record=bool(args.plot or args.out or not args.json),
-                              progress=False if args.quiet else None)
-            formatter = format_summary
+        result = simulate(scenario, record=bool(args.plot or args.out or not args.json),
+                          progress=False if args.quiet else None)
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -54,9 +47,8 @@ def handle(args: argparse.Namespace) -> int:
         if args.plot:
             result.plot(path=args.plot)
         if args.out:
-            write_outputs(result, summary, Path(args.out))
-            if _is_formation(scenario):
-                result.write_gif(Path(args.out) / "formation.gif")
+            for written in write_outputs(result, summary, Path(args.out)):
+                print(f"wrote {written}", file=sys.stderr)
     except (OSError, ValueError) as exc:  # unwritable place, unknown image format
         print(f"nonholo run: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE
@@ -64,45 +56,79 @@ def handle(args: argparse.Namespace) -> int:
         json.dump(summary, sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(formatter(summary))
+        print(format_summary(summary))
     return EXIT_OK
 
 
-def _is_formation(scenario) -> bool:
-    from nonholo.formation.model import Formation
-
-    return isinstance(scenario, Formation)
-
-
-def write_outputs(result, summary: dict, out: Path) -> None:
-    import numpy as np
-
+def write_outputs(result, summary: dict, out: Path) -> list[Path]:
+    """result.json, trajectories.csv (tidy: one row per robot and sample, units in the
+    header), plot.png and, for formations and posture runs, formation.gif."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "result.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
-    columns, header = [result.t], ["t"]
-    for i, name in enumerate(result.names):
-        for field in ("x", "y", "theta", "xi", "v", "omega"):
-            columns.append(result.trajectory(field)[i])
-            header.append(f"{name}.{field}")
-    np.savetxt(out / "trajectories.csv", np.column_stack(columns), delimiter=",", header=",".join(header),
-               comments="", fmt="%.9g")
-    result.plot(path=out / "plot.png")
+    written = [out / "result.json", out / "trajectories.csv", out / "plot.png"]
+    written[0].write_text(json.dumps(summary, indent=2, allow_nan=False))
+    result.write_csv(written[1])
+    result.plot(path=written[2])
+    scenario = result.scenario
+    if scenario.followers or any(r.posture for r in scenario.roots):
+        written.append(result.write_gif(out / "formation.gif"))
+    return written
+
+
+def _g(value, width: int = 9) -> str:
+    return f"{'-':>{width}}" if value is None else f"{value:{width}.3g}"
 
 
 def format_summary(summary: dict) -> str:
+    """A terminal summary (at most 100 columns): a line per robot, then safety."""
     sim = summary["simulation"]
-    lines = [f"{summary['scenario']}: {summary['reference']['kind']} reference, {sim['duration']:.6g} s, "
-             f"{sim['steps']} steps of {sim['dt']:.4g} s ({sim['method']}), {sim['elapsed_s']:.3f} s",
-             f"{'robot':<26} {'controller':<26} {'mean':>9} {'std':>9} {'max':>9} {'final':>9} "
-             f"{'peak v':>8} {'peak w':>8}  events"]
+    reference = summary["reference"]["kind"] + " reference" if summary["reference"] else "no reference"
+    lines = [f"{summary['scenario']}: {reference}, {sim['duration']:.6g} s, {sim['steps']} steps of {sim['dt']:.4g} s "
+             f"({sim['method']}, up to {sim['max_substeps']} sub-steps), {sim['elapsed_s']:.3f} s",
+             f"{'robot':<16} {'law':<26} {'what':<10} {'mean':>9} {'max':>9} {'final':>9} {'peak v':>7} {'peak w':>7}"]
+    notes = []
     for name, robot in summary["robots"].items():
-        e, c, ev = robot["error"], robot["control"], robot["events"]
+        c, ev = robot["control"], robot["events"]
+        peaks = f"{c['peak_v']:7.3g} {c['peak_omega']:7.3g}"
+        if robot["role"] == "follower":
+            f = robot["formation"]
+            law = f"{'l-phi' if f['law'] == 'separation-bearing' else 'l-l'} of {', '.join(f['leaders'])}"
+            for j, (key, e) in enumerate((k, v) for k, v in f.items() if k.endswith("_error")):
+                label = key[:-6] + (" (rad)" if key == "phi_error" else " (m)")
+                lines.append(f"{name if j == 0 else '':<16.16} {law if j == 0 else '':<26.26} {label:<10} "
+                             f"{_g(e['mean'])} {_g(e['max'])} {_g(e['final'])} {peaks if j == 0 else ''}".rstrip())
+            s = f["safety"]
+            extra = f", min |sin(g1-g2)| {s['min_abs_sin_gamma_difference']:.3g}" if "min_abs_sin_gamma_difference" in s \
+                else ""
+            notes.append(f"{name}: closest robot {_g(s['min_distance'], 0)} m at t = {_g(s['min_distance_time'], 0)} s, "
+                         f"{s['time_below_2d']:.3g} s below 2d{extra}")
+            for change in f["settling"] or []:
+                parts = [f"{k.replace('_settling_time', '')} settles in {_g(v, 0)} s" for k, v in change.items()
+                         if k.endswith("_settling_time")]
+                parts += [f"{k.replace('_disturbance', '')} deviates at most {_g(v, 0)}" for k, v in change.items()
+                          if k.endswith("_disturbance")]
+                notes.append(f"{name}: change at {change['at']:g} s ({change['mode']}): {', '.join(parts)}")
+        elif "posture" in robot:
+            p = robot["posture"]
+            lines.append(f"{name:<16.16} {robot['controller']:<26.26} {'goal (m)':<10} {'':>9} "
+                         f"{_g(p['position_error']['max'])} {_g(p['position_error']['final'])} {peaks}")
+            notes.append(f"{name}: goal distance final {p['position_error']['final']:.3g} m, heading error final "
+                         f"{p['heading_error']['final']:.3g} rad" + (f" ({p['note']})" if "note" in p else ""))
+        else:
+            e = robot["error"]
+            lines.append(f"{name:<16.16} {robot['controller']:<26.26} {'error (m)':<10} {_g(e['mean'])} "
+                         f"{_g(e['max'])} {_g(e['final'])} {peaks}")
         events = []
         if ev["saturated_v_samples"] or ev["saturated_omega_samples"]:
-            events.append(f"saturated {100 * ev['saturated_fraction']:.1f}%")
+            events.append(f"saturated {100 * ev['saturated_fraction']:.1f}% of samples")
         if ev["singular_samples"]:
-            events.append(f"singular x{ev['singular_samples']} from t={ev['first_singular_time']:.3g}s")
-        lines.append(f"{name:<26} {robot['controller']:<26} {e['mean']:9.4g} {e['std']:9.4g} {e['max']:9.4g} "
-                     f"{e['final']:9.3g} {c['peak_v']:8.3g} {c['peak_omega']:8.3g}  {', '.join(events) or '-'}")
-    lines.append("errors in metres on the uniform output grid; peak v in m/s, peak w in rad/s")
+            events.append(f"singular x{ev['singular_samples']} from t = {ev['first_singular_time']:.3g} s")
+        if events:
+            notes.append(f"{name}: {', '.join(events)}")
+    safety = summary["safety"]
+    if safety.get("min_distance") is not None:
+        notes.append(f"closest pair {' / '.join(safety['min_distance_pair'])}: {safety['min_distance']:.4g} m at "
+                     f"t = {safety['min_distance_time']:.4g} s; {safety['time_below_2d']:.4g} s closer than "
+                     f"2d = {safety['two_d']:g} m")
+    lines += notes
+    lines.append("errors on the uniform output grid; peak v in m/s, peak w in rad/s")
     return "\n".join(lines)

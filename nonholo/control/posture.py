@@ -123,14 +123,14 @@ POSTURE_CONTROLLERS: dict[str, TrackingController] = {c.name: c for c in (
         laws={"default": time_varying_posture_law}, gains=("k1", "k2", "k3", "k5", "k6"),
         defaults={"k1": 0.5, "k2": 2.0, "k3": 1.0, "k5": 1.0, "k6": 50.0},
         rules={g: POSITIVE for g in ("k1", "k2", "k3", "k5", "k6")},
-        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"])),
+        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"]), kind="posture"),
     TrackingController(
         name="polar", title="Polar-coordinate posture law",
         source="thesis Eq 4.52-4.54, 5.13; spec §5.2 (errata 11, 28); Aicardi et al. 1995",
         laws={"default": polar_posture_law}, gains=("k1", "k2", "k3", "tolerance"),
         defaults={"k1": 1.0, "k2": 3.0, "k3": 2.0, "tolerance": 1e-9},
         rules={g: POSITIVE for g in ("k1", "k2", "k3", "tolerance")},
-        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k2"])),
+        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k2"]), kind="posture"),
     TrackingController(
         name="dynamic-feedback-posture", title="Dynamic feedback linearization posture regulator",
         source="thesis Eq 4.55, 5.14; spec §5.3 (errata 13, 29); Oriolo, De Luca & Vendittelli 2002",
@@ -138,7 +138,7 @@ POSTURE_CONTROLLERS: dict[str, TrackingController] = {c.name: c for c in (
         defaults={"kp1": 2.0, "kd1": 3.0, "kp2": 12.0, "kd2": 7.0, "xi_min": 1e-9, "xi0": 0.1},
         rules={g: POSITIVE for g in ("kp1", "kd1", "kp2", "kd2", "xi_min")} | {"xi0": NONZERO_KICK},
         initial_compensator="xi0", needs_moving_reference=False,
-        stiffness=lambda g, v, w: max(g["kd1"], g["kd2"])),
+        stiffness=lambda g, v, w: max(g["kd1"], g["kd2"]), kind="posture"),
 )}
 
 HEADING_CONTROLLED = {"time-varying": True, "polar": True, "dynamic-feedback-posture": False}

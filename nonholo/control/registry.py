@@ -52,6 +52,15 @@ class TrackingController:
     initial_compensator: str | None = None
     needs_moving_reference: bool = True
     stiffness: Callable[[Mapping[str, float], float, float], float] = lambda gains, v_d, omega_d: 0.0
+    kind: str = "tracking"
+
+    @property
+    def xi_is_speed(self) -> bool:  # TEMP shim until the declaration API lands
+        return self.initial_compensator == "xi0"
+
+    @property
+    def gain_tuple(self):
+        return _gain_tuple(self.name, self.kind, self.gains)
 
     @property
     def variants(self) -> tuple[str, ...]:
@@ -87,6 +96,45 @@ class TrackingController:
                 raise NonholoInputError(f"gain {name!r} of {self.name} must be {rule.wording}, got {resolved[name]:g}")
         xi0 = resolved.pop(self.initial_compensator, None) if self.initial_compensator else None
         return ControllerConfig(self, variant, MappingProxyType(resolved), xi0)
+
+
+_TUPLES = {}
+
+
+def _gain_tuple(name, kind, gains):
+    import sys
+    from collections import namedtuple
+    key = (name, kind)
+    if key not in _TUPLES:
+        fields = (("goal_x", "goal_y", "goal_theta") if kind == "posture" else ()) + tuple(gains)
+        cls = namedtuple(name.replace("-", "_") + "_fields", fields)
+        cls.__module__ = __name__
+        globals()[cls.__name__] = cls
+        _TUPLES[key] = cls
+    return _TUPLES[key]
+
+
+def initial_state(config, v_d0, name):
+    if config.controller.kind == "posture":
+        return float(config.xi0) if config.controller.initial_compensator else 0.0
+    if not config.controller.initial_compensator:
+        return 0.0
+    if config.xi0 is not None:
+        return config.xi0
+    if abs(v_d0) < 1e-9:
+        from nonholo.errors import InfeasibleReferenceError
+        raise InfeasibleReferenceError(
+            f"robot {name!r}: xi0 defaults to v_d(0) = {v_d0:.3g}, the singular point of dynamic feedback; "
+            "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
+    return v_d0
+
+
+def follower_gains(values):
+    for g in ("k1", "k2"):
+        v = values[g]
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
+            raise NonholoInputError(f"gains.{g}: must be > 0, got {v!r}")
+    return dict(values)
 
 
 @dataclass(frozen=True)
@@ -178,7 +226,8 @@ def controller(name: str, variant: str | None = None, **gains: float) -> Control
 
     Unknown names list the valid ones; unknown gains list the controller's gains.
     """
-    spec = CONTROLLERS.get(name)
+    from nonholo.control.posture import POSTURE_CONTROLLERS
+    spec = CONTROLLERS.get(name) or POSTURE_CONTROLLERS.get(name)
     if spec is None:
         raise NonholoInputError(f"unknown controller {name!r} (valid: {', '.join(CONTROLLERS)})")
     return spec.configure(gains, variant)

@@ -23,9 +23,56 @@ Schema (every field optional unless marked)::
     v_max = 2.0            # optional actuator limits
     omega_max = 3.0
 
-A file whose robots include followers (``formation = ...``) or posture leaders
-(``goal = [x, y, theta]``) is a formation file: see ``nonholo.formation.files`` for the
-extended schema; ``parse_scenario`` then returns a ``nonholo.formation.Formation``.
+The same reader reads followers, posture roots and formation options (one schema; angles
+are numbers in radians or expressions of pi)::
+
+    name = "formation-circle"
+    [simulation]
+    duration = 125.66       # s (default: the reference's natural duration; required without one)
+    dt = 0.01               # or steps = N
+    substeps = 4            # optional; default: planned from a pilot run
+    method = "rk4"          # or "solve_ivp"
+
+    [formation]             # optional
+    piconet = true          # one leader, at most 7 followers (Bluetooth piconet)
+    sin_floor = 1e-6        # l-l guard on |sin(γ1 − γ2)|
+
+    [reference]             # needed when a leader tracks a reference
+    kind = "circle"
+
+    [[robots]]              # a tracking leader: the core robot fields
+    name = "leader"
+    controller = "dynamic-feedback"
+    start = [0, 0, "pi/2"]
+
+    [[robots]]              # a posture leader instead: goal + posture controller
+    name = "parker"
+    goal = [0, 0, 0]
+    controller = "polar"    # time-varying | polar | dynamic-feedback-posture
+    gains = { k1 = 1, k2 = 3, k3 = 2 }
+
+    [[robots]]              # an l-φ follower
+    name = "f1"
+    formation = "separation-bearing"
+    leader = "leader"
+    l = 2.0
+    phi = "pi/3"            # angles: numbers (radians) or expressions of pi
+    d = 1.0
+    gains = { k1 = 1, k2 = 1 }
+    start_relative = [-4, 0, 0]   # axle pose in the leader's body frame (or start = [x, y, θ])
+
+    [[robots.changes]]      # run-time formation change (thesis Eq 5.9)
+    at = 100
+    phi = "4*pi/3"
+    mode = "step"           # or "ramp" with duration = T
+    direction = "counterclockwise"   # shortest | counterclockwise | clockwise
+
+    [[robots]]              # an l-l follower
+    name = "f2"
+    formation = "separation-separation"
+    leaders = ["leader", "f1"]
+    l = [2.0, 2.0]
+    start_relative = [-3, -2, 0]     # in the frame of the first leader
 """
 from __future__ import annotations
 
@@ -34,9 +81,12 @@ import tomllib
 from pathlib import Path
 
 from nonholo import references
+from nonholo.control.posture import POSTURE_CONTROLLERS
 from nonholo.control.registry import CONTROLLERS
 from nonholo.errors import NonholoInputError, ScenarioError
-from nonholo.sim.scenario import METHODS, Robot, Scenario
+from nonholo.errors import ExpressionError, FormationError
+from nonholo.sim.scenario import (CHANGE_MODES, DIRECTIONS, FORMATION_LAWS, METHODS, OUTPUTS, SEPARATION_BEARING,
+                                  Change, Follower, Robot, Scenario)
 
 REFERENCE_PARAMETERS = {
     "eight": {"amplitude_x": "number", "amplitude_y": "number", "period_x": "number", "period_y": "number"},
@@ -48,7 +98,11 @@ REFERENCE_PARAMETERS = {
 }
 REQUIRED_REFERENCE_PARAMETERS = {"expression": ("x", "y"), "waypoints": ("points",)}
 SIMULATION_FIELDS = {"duration", "dt", "steps", "substeps", "control_period", "method"}
-ROBOT_FIELDS = {"name", "start", "controller", "gains", "variant", "v_max", "omega_max"}
+ROBOT_FIELDS = {"name", "start", "controller", "gains", "variant", "v_max", "omega_max", "goal"}
+FOLLOWER_FIELDS = {"name", "formation", "leader", "leaders", "l", "phi", "d", "gains", "start", "start_relative",
+                   "changes", "v_max", "omega_max"}
+CHANGE_FIELDS = {"at", "l", "phi", "l1", "l2", "mode", "duration", "direction"}
+FORMATION_FIELDS = {"piconet", "sin_floor"}
 
 
 def _is_number(value) -> bool:
@@ -136,14 +190,39 @@ class _Reader:
             self.fail(field, f"expected a list of at least two [t, x, y] points, got {_describe(value)}")
         return [self.numbers(p, f"{field}[{i}]", 3) for i, p in enumerate(value)]
 
+    def angle(self, value, field: str) -> float:
+        """A number (radians) or an expression such as "4*pi/3"."""
+        if isinstance(value, str):
+            from nonholo.expressions import parse_expression
+
+            try:
+                number = float(parse_expression(value, {}))
+            except (ExpressionError, TypeError) as exc:
+                self.fail(field, f"expected a number or an expression of pi, got {value!r} ({exc})")
+            if not math.isfinite(number):
+                self.fail(field, f"expected a finite angle, got {value!r}")
+            return number
+        return self.number(value, field)
+
+    def pose(self, value, field: str) -> tuple[float, float, float]:
+        if not (isinstance(value, list) and len(value) == 3):
+            self.fail(field, f"expected a list of 3 finite numbers [x, y, theta], got {_describe(value)}")
+        return self.number(value[0], f"{field}[0]"), self.number(value[1], f"{field}[1]"), \
+            self.angle(value[2], f"{field}[2]")
+
+    def limits(self, data, where: str) -> dict:
+        return {k: self.number(data[k], f"{where}.{k}", positive=True) for k in ("v_max", "omega_max") if k in data}
+
     def robot(self, data, index: int) -> Robot:
+        """A root: tracking (``controller``, ``gains``, ``variant``) or, with ``goal``, posture."""
         where = f"robots[{index}]"
         data = self.table(data, where, ROBOT_FIELDS)
         name = self.string(data.get("name", f"robot{index}"), f"{where}.name")
-        start = self.numbers(data.get("start", [0.0, 0.0, 0.0]), f"{where}.start", 3)
-        controller_name = self.string(data.get("controller", "dynamic-feedback"), f"{where}.controller",
-                                      tuple(CONTROLLERS))
-        spec = CONTROLLERS[controller_name]
+        posture = "goal" in data
+        family = POSTURE_CONTROLLERS if posture else CONTROLLERS
+        controller_name = self.string(data.get("controller", "polar" if posture else "dynamic-feedback"),
+                                      f"{where}.controller", tuple(family))
+        spec = family[controller_name]
         gains = dict(self.table(data.get("gains", {}), f"{where}.gains"))
         variant = gains.pop("variant", None) if isinstance(gains.get("variant"), str) else None
         variant = self.string(data.get("variant", variant or spec.variants[0]), f"{where}.variant", spec.variants)
@@ -152,29 +231,115 @@ class _Reader:
                 self.fail(f"{where}.gains.{gain}",
                           f"unknown gain for {controller_name} (gains: {', '.join(spec.accepted_gains)})")
             self.number(value, f"{where}.gains.{gain}")
-        limits = {k: self.number(data[k], f"{where}.{k}", positive=True) for k in ("v_max", "omega_max") if k in data}
         try:
             config = spec.configure(gains, variant)
         except NonholoInputError as exc:
             self.fail(f"{where}.gains", str(exc))
-        return Robot(name, config, start, **limits)
+        goal = self.pose(data["goal"], f"{where}.goal") if posture else None
+        return Robot(name, config, self.pose(data.get("start", [0.0, 0.0, 0.0]), f"{where}.start"),
+                     goal=goal, **self.limits(data, where))
+
+    def follower(self, data, index: int) -> Follower:
+        where = f"robots[{index}]"
+        self.table(data, where, FOLLOWER_FIELDS)
+        name = self.string(data.get("name", f"robot{index}"), f"{where}.name")
+        law = self.string(data["formation"], f"{where}.formation", FORMATION_LAWS)
+        if law == SEPARATION_BEARING:
+            for field in ("leader", "l", "phi"):
+                if field not in data:
+                    self.fail(f"{where}.{field}", "missing: a separation-bearing follower needs leader, l and phi")
+            if "leaders" in data:
+                self.fail(f"{where}.leaders", "a separation-bearing follower has one leader: use leader = \"name\"")
+            leaders = (self.string(data["leader"], f"{where}.leader"),)
+            targets = (self.number(data["l"], f"{where}.l"), self.angle(data["phi"], f"{where}.phi"))
+        else:
+            for field in ("leaders", "l"):
+                if field not in data:
+                    self.fail(f"{where}.{field}", "missing: a separation-separation follower needs leaders = [a, b] and l = [l1, l2]")
+            for field in ("leader", "phi"):
+                if field in data:
+                    self.fail(f"{where}.{field}", "not a field of a separation-separation follower (it has leaders and l = [l1, l2])")
+            value = data["leaders"]
+            if not (isinstance(value, list) and len(value) == 2 and all(isinstance(v, str) for v in value)):
+                self.fail(f"{where}.leaders", f"expected two robot names [a, b], got {value!r}")
+            leaders = tuple(value)
+            targets = self.numbers(data["l"], f"{where}.l", 2)
+        gains = self.table(data.get("gains", {}), f"{where}.gains", {"k1", "k2"})
+        k = {g: self.number(gains.get(g, 1.0), f"{where}.gains.{g}") for g in ("k1", "k2")}
+        d = self.number(data.get("d", 1.0), f"{where}.d")
+        if "start" in data and "start_relative" in data:
+            self.fail(f"{where}.start_relative", "give start (world) or start_relative (leader frame), not both")
+        start, frame = None, "world"
+        if "start" in data:
+            start = self.pose(data["start"], f"{where}.start")
+        elif "start_relative" in data:
+            start, frame = self.pose(data["start_relative"], f"{where}.start_relative"), "leader"
+        changes_data = data.get("changes", [])
+        if not isinstance(changes_data, list):
+            self.fail(f"{where}.changes", "expected [[robots.changes]] tables")
+        changes = tuple(self.change(c, f"{where}.changes[{j}]", OUTPUTS[law]) for j, c in enumerate(changes_data))
+        return Follower(name, law, leaders, targets, d, k["k1"], k["k2"], start, frame, changes, **self.limits(data, where))
+
+    def change(self, data, where: str, outputs) -> Change:
+        self.table(data, where, CHANGE_FIELDS)
+        if "at" not in data:
+            self.fail(f"{where}.at", "missing: the time of the change (s)")
+        targets = {}
+        for name in ("l", "phi", "l1", "l2"):
+            if name in data:
+                if name not in outputs:
+                    self.fail(f"{where}.{name}", f"not an output of this follower (outputs: {', '.join(outputs)})")
+                targets[name] = self.angle(data[name], f"{where}.{name}") if name == "phi" else \
+                    self.number(data[name], f"{where}.{name}")
+        mode = self.string(data.get("mode", "step"), f"{where}.mode", CHANGE_MODES)
+        duration = self.number(data["duration"], f"{where}.duration", positive=True) if "duration" in data else 0.0
+        if mode == "ramp" and "duration" not in data:
+            self.fail(f"{where}.duration", "missing: a ramp needs its duration (s)")
+        if mode == "step" and "duration" in data:
+            self.fail(f"{where}.duration", "only a ramp has a duration (mode = \"ramp\")")
+        direction = self.string(data.get("direction", "shortest"), f"{where}.direction", DIRECTIONS)
+        return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
+
+    def change(self, data, where: str, outputs) -> Change:
+        self.table(data, where, CHANGE_FIELDS)
+        if "at" not in data:
+            self.fail(f"{where}.at", "missing: the time of the change (s)")
+        targets = {}
+        for name in ("l", "phi", "l1", "l2"):
+            if name in data:
+                if name not in outputs:
+                    self.fail(f"{where}.{name}", f"not an output of this follower (outputs: {', '.join(outputs)})")
+                targets[name] = self.angle(data[name], f"{where}.{name}") if name == "phi" else \
+                    self.number(data[name], f"{where}.{name}")
+        mode = self.string(data.get("mode", "step"), f"{where}.mode", CHANGE_MODES)
+        duration = self.number(data["duration"], f"{where}.duration", positive=True) if "duration" in data else 0.0
+        if mode == "ramp" and "duration" not in data:
+            self.fail(f"{where}.duration", "missing: a ramp needs its duration (s)")
+        if mode == "step" and "duration" in data:
+            self.fail(f"{where}.duration", "only a ramp has a duration (mode = \"ramp\")")
+        direction = self.string(data.get("direction", "shortest"), f"{where}.direction", DIRECTIONS)
+        return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
 
     def scenario(self, data, name: str) -> Scenario:
-        from nonholo.formation.files import is_formation_data, read_formation
-
-        if is_formation_data(data):  # followers or posture leaders: nonholo.formation.files
-            return read_formation(self, data, name)
-        data = self.table(data, "", {"simulation", "reference", "robots", "name"})
+        data = self.table(data, "", {"simulation", "reference", "robots", "name", "formation"})
         simulation = self.table(data.get("simulation", {}), "simulation", SIMULATION_FIELDS)
-        if "reference" not in data:
-            self.fail("reference", "missing table [reference]")
-        reference = self.reference(data["reference"])
+        options = self.table(data.get("formation", {}), "formation", FORMATION_FIELDS)
+        reference = self.reference(data["reference"]) if "reference" in data else None
         robots_data = data.get("robots")
         if not isinstance(robots_data, list) or not robots_data:
             self.fail("robots", "expected at least one [[robots]] table")
-        robots = [self.robot(r, i) for i, r in enumerate(robots_data)]
+        robots = []
+        for i, robot in enumerate(robots_data):
+            robot = self.table(robot, f"robots[{i}]")
+            robots.append(self.follower(robot, i) if "formation" in robot else self.robot(robot, i))
+        if reference is None and any(isinstance(r, Robot) and not r.posture for r in robots):
+            self.fail("reference", "missing table [reference] (a robot tracks it)")
         kwargs = {}
-        for field_name in ("duration", "dt", "control_period"):
+        if "duration" in simulation:
+            kwargs["duration"] = self.number(simulation["duration"], "simulation.duration", positive=True)
+        elif reference is None or reference.default_duration is None:
+            self.fail("simulation.duration", "missing: needed when no reference gives a natural duration")
+        for field_name in ("dt", "control_period"):
             if field_name in simulation:
                 kwargs[field_name] = self.number(simulation[field_name], f"simulation.{field_name}", positive=True)
         for field_name in ("steps", "substeps"):
@@ -183,17 +348,31 @@ class _Reader:
                 if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
                     self.fail(f"simulation.{field_name}", f"expected a positive integer, got {_describe(value)}")
                 kwargs[field_name] = value
+        if "dt" in simulation and "steps" in simulation:
+            self.fail("simulation.steps", "give dt or steps, not both")
         if "method" in simulation:
             kwargs["method"] = self.string(simulation["method"], "simulation.method", METHODS)
+        if "piconet" in options:
+            if not isinstance(options["piconet"], bool):
+                self.fail("formation.piconet", f"expected true or false, got {_describe(options['piconet'])}")
+            kwargs["piconet"] = options["piconet"]
+        if "sin_floor" in options:
+            kwargs["sin_floor"] = self.number(options["sin_floor"], "formation.sin_floor", positive=True)
+        names = [r.name for r in robots]
         try:
             return Scenario(reference, robots, name=self.string(data.get("name", name), "name"), **kwargs)
+        except FormationError as exc:
+            if exc.robot is not None and exc.robot in names:
+                self.fail(f"robots[{names.index(exc.robot)}].{exc.field}", exc.problem)
+            field = {"formation": "robots", "piconet": "formation.piconet", "robots": "robots",
+                     "sin_floor": "formation.sin_floor"}.get(exc.field, f"simulation.{exc.field}")
+            self.fail(field, exc.problem)
         except NonholoInputError as exc:
             self.fail("simulation", str(exc))
 
 
 def parse_scenario(text: str, source: str = "<scenario>", name: str = "scenario") -> Scenario:
-    """A Scenario (a ``nonholo.formation.Formation`` for formation files) from TOML text;
-    ``ScenarioError`` (one line) on any problem."""
+    """A Scenario from TOML text; ``ScenarioError`` (one line) on any problem."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

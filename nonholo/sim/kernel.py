@@ -1,35 +1,56 @@
-"""Compiled batch integration: fixed-step RK4 of the unicycle under a tracking law.
+"""The one compiled kernel: fixed-step RK4 of a graph of unicycles — roots under a tracking or
+posture law, followers under an l–φ or l–l formation law — for a batch of copies at once.
 
-Data layout (structure of arrays, robots innermost so that loops vectorize):
+Data layout (structure of arrays, the batch axis innermost so that loops over it vectorize).
+R robots of one graph, listed so that ``order`` visits parents before children; B copies
+(batch members) of that graph, which share its structure and differ in fields and starts:
 
-* ``state``  (4, n): x, y, θ, ξ (ξ = dynamic compensator; constant for static laws)
-* ``gains``  (MAX_GAINS, n): the law's gain vector per robot (unused rows zero)
-* ``limits`` (2, n): |v| ≤ v_max, |ω| ≤ ω_max (inf = no limit)
-* ``rows``   (r, 10): the reference evaluated at every stage time (``REF_COLUMNS``);
-  output step k with m_k sub-steps owns rows ``row_start[k] … row_start[k] + 2 m_k``
-  (times t_k + j h/2, h = dt/m_k), the last one shared with step k + 1
-* ``stats``  (STAT_COUNT, n): running statistics sampled at t_k = k·dt (Welford mean)
-* ``record`` (6, N + 1, n) or (6, 0, n): x, y, θ, ξ, v, ω on the output grid
-* ``held``   (6, n): v, ω, ξ̇ and their flags held between control instants
+* ``state``   (4, R, B): x, y, θ, ξ (ξ = the law's own state, e.g. the dynamic compensator)
+* ``fields``  (MAX_FIELDS, R, B): a root's law fields (its gain namedtuple, goal first for a
+  posture law); a follower's k1, k2, d
+* ``limits``  (2, R, B): |v| ≤ v_max, |ω| ≤ ω_max (inf = no limit)
+* ``rows``    (r, 10): the reference at every stage time (``REF_COLUMNS``); output step k
+  with m_k sub-steps owns rows ``row_start[k] … row_start[k] + 2 m_k`` (times t_k + j h/2,
+  h = dt/m_k), the last one shared with step k + 1
+* ``targets`` (r, 4, R): follower targets z1_d, z2_d and their rates at the same stage times;
+  ``offsets`` (2, R, B) per-copy constant offsets added to z1_d, z2_d (sweeps of l, φ)
+* topology: ``kinds`` (R,) ``ROOT_A``/``ROOT_B`` (root under law A or B), ``SEPARATION_BEARING``,
+  ``SEPARATION_SEPARATION``; ``parents`` (2, R); ``feeds`` (R,) 1 where a robot has children
+* ``branch``  (R, B): each l–φ bearing on its continuous 2π branch
+* ``stats``   (STAT_COUNT, R, B) running statistics sampled at t_k = k·dt; ``pair_stats``
+  (PAIR_COUNT, B) the closest pair of each copy; ``d_max`` (B,) its largest castor offset
+* ``record``  (REC_COUNT, N + 1, R, B), or (REC_COUNT, 0, R, B) for statistics only
+* ``held``    (HELD_COUNT, R, B): commands held between control instants (sampled data)
+* ``step_rate`` (N + 1,): the fastest rate met during each output step (|ω| of every robot and
+  |ξ̇/ξ| of speed compensators), measured only for graphs with followers (sub-step planning)
 
-Each RK4 sub-step is one loop over robots that keeps the four stages in registers, so
-memory is touched once per robot and step. Inside the loops over robots only inline
-functions of scalars and tuples are called: an inlined function that receives an array
-reference-counts it on every iteration, which costs atomics and stops vectorization. The
-statistics are sampled by a loop of their own at each output time. The kernel
-mutates ``state``, ``stats``, ``record`` and ``held`` and can be resumed
-(``k_start``/``k_stop``), so callers can show progress. One kernel is compiled per law
-(``make_integrator``) and cached on disk by numba.
+Continuous-time control evaluates every law at every RK4 stage. Each robot keeps its four
+stages in registers; a robot with children writes its stage poses and commands to a small
+scratch array, from which its children read them at the same stage (spec
+follower-posture.md §4: parents first, their *computed* commands). Sampled-data control
+(``hold_every`` > 0, spec fleet.md §2) evaluates every law once per control instant, parents
+first, and integrates each robot with its command held.
+
+Inside the loops over the batch only inline functions of scalars and tuples are called: an
+inlined function that writes through an array argument reference-counts it on every
+iteration, which stops vectorization. The kernel mutates ``state``, ``branch``, ``stats``,
+``pair_stats``, ``record``, ``held`` and ``step_rate``, and can be resumed (``k_start``,
+``k_stop``) so that callers can show progress. One kernel is compiled per pair of root laws
+and per "has followers" (``make_kernel``) and cached on disk by numba.
 """
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import llvmlite.binding
 import numpy as np
 from numba import njit
 from numba.core.dispatcher import Dispatcher
 
+from nonholo.control.formation import separation_bearing_law, separation_separation_law
+from nonholo.models.formation_geometry import link_geometry
+from nonholo.models.formation_kinematics import bearing_rate, separation_rate
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.numerics import sincos, wrap_angle
 from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
@@ -41,27 +62,46 @@ from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
 llvmlite.binding.set_option("nonholo", "-runtime-memory-check-threshold=256")
 llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
 
-(E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, W_PEAK, V_SQ, W_SQ,
- SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR) = range(17)
-STAT_COUNT = 17
-REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA = range(6)
+ROOT_A, ROOT_B, SEPARATION_BEARING, SEPARATION_SEPARATION = range(4)
+MAX_FIELDS = 10
+K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
+
+(E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
+ SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D) = range(25)
+STAT_COUNT = 25
+CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
+PAIR_COUNT = 5
+(REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
+ REC_SIN_GAMMA, REC_SINGULAR, REC_SATURATED) = range(15)
+REC_COUNT = 15
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
-MAX_GAINS = 5
+HELD_COUNT = 6
+# What one evaluation at an instant gives per robot (``instant`` array rows).
+(I_V, I_OMEGA, I_XI_DOT, I_SINGULAR, I_SAT_V, I_SAT_OMEGA, I_OUT1, I_OUT2, I_ERR1, I_ERR2, I_RATE1, I_RATE2,
+ I_SIN_GAMMA) = range(13)
+INSTANT_COUNT = 13
 
 # "contract" lets LLVM fuse a*b + c into one FMA instruction (deterministic, and more
 # accurate); no other fast-math relaxations, so NaN/inf semantics and ordering stay IEEE.
 _OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract"})
 
 
-def new_stats(n: int) -> np.ndarray:
-    stats = np.zeros((STAT_COUNT, n))
-    stats[FIRST_SINGULAR] = np.inf
-    return stats
+def new_stats(robots: int, batch: int) -> tuple[np.ndarray, np.ndarray]:
+    """Empty running statistics ``(stats, pair_stats)``."""
+    stats = np.zeros((STAT_COUNT, robots, batch))
+    stats[[FIRST_SINGULAR, MIN_SIN, NEAR]] = np.inf
+    stats[NEAR_WHO] = -1.0
+    pair_stats = np.zeros((PAIR_COUNT, batch))
+    pair_stats[CLOSEST] = np.inf
+    pair_stats[[CLOSEST_I, CLOSEST_J]] = -1.0
+    return stats, pair_stats
 
 
 @njit(inline="always", **_OPTIONS)
-def gains_of(gains, i):
-    return gains[0, i], gains[1, i], gains[2, i], gains[3, i], gains[4, i]
+def field_row(fields, r, b):
+    """A robot's fields as a tuple of scalars (laws take the first n, by name)."""
+    return (fields[0, r, b], fields[1, r, b], fields[2, r, b], fields[3, r, b], fields[4, r, b], fields[5, r, b],
+            fields[6, r, b], fields[7, r, b], fields[8, r, b], fields[9, r, b])
 
 
 @njit(inline="always", **_OPTIONS)
@@ -82,107 +122,86 @@ def saturate(v_raw, omega_raw, v_max, omega_max):
 
 
 @njit(inline="always", **_OPTIONS)
-def command_at(law, x, y, theta, xi, ref, gains_i, v_max, omega_max):
-    """Saturated law output and its flags at one state: (v, ω, ξ̇, singular,
-    v saturated, ω saturated, cos θ, sin θ)."""
+def continuous_bearing(raw, previous):
+    """φ on the 2π branch nearest ``previous`` (spec follower-posture.md §2.5)."""
+    return previous + wrap_angle(raw - previous)
+
+
+@njit(inline="always", **_OPTIONS)
+def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
+    """A root's saturated command at one state: (v, ω, ξ̇, singular, sat v, sat ω, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
-    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains_i)
-    v, omega, saturated_v, saturated_omega = saturate(v_raw, omega_raw, v_max, omega_max)
-    return v, omega, xi_dot, singular, saturated_v, saturated_omega, cos_t, sin_t
+    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
+    v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
+    return v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t
 
 
 @njit(inline="always", **_OPTIONS)
-def refresh_held(law, state, ref, gains, limits, held):
-    """Sampled-data control instant: evaluate the law once and hold its output."""
-    for i in range(state.shape[1]):
-        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = command_at(
-            law, state[0, i], state[1, i], state[2, i], state[3, i], ref, gains_of(gains, i), limits[0, i],
-            limits[1, i])
-        held[HELD_V, i] = v
-        held[HELD_OMEGA, i] = omega
-        held[HELD_XI_DOT, i] = xi_dot
-        held[HELD_SINGULAR, i] = singular
-        held[HELD_SAT_V, i] = sat_v
-        held[HELD_SAT_OMEGA, i] = sat_w
+def bearing_command(x, y, theta, px, py, ptheta, pv, pomega, branch, l_d, phi_d, l_rate, phi_rate, k1, k2, d,
+                    v_max, omega_max):
+    """An l–φ follower's saturated command and link state: (v, ω, sat v, sat ω, cos θ, sin θ,
+    l, φ, l̇, φ̇) with φ on the branch nearest ``branch``."""
+    sin_t, cos_t = sincos(theta)
+    separation, raw, cos_phi, sin_phi, cos_g, sin_g = link_geometry(px, py, ptheta, x, y, cos_t, sin_t, theta, d)
+    bearing = continuous_bearing(raw, branch)
+    v_raw, omega_raw = separation_bearing_law(separation, bearing, cos_phi, sin_phi, cos_g, sin_g, pv, pomega, l_d,
+                                              phi_d, l_rate, phi_rate, k1, k2, d)
+    v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
+    l_dot = separation_rate(v, omega, pv, d, cos_phi, cos_g, sin_g)
+    phi_dot = bearing_rate(v, omega, pv, pomega, separation, d, sin_phi, cos_g, sin_g)
+    return v, omega, sat_v, sat_w, cos_t, sin_t, separation, bearing, l_dot, phi_dot
 
 
 @njit(inline="always", **_OPTIONS)
-def sample_step(law, recording, sampled_data, state, ref, gains, limits, held, stats, record, k):
-    """Add every robot's sample at output step k (time ref[0]) to its statistics: the
-    position-error norm (Welford mean), heading error, commands in force and events."""
-    for i in range(state.shape[1]):
-        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
-        if sampled_data:
-            v, omega = held[HELD_V, i], held[HELD_OMEGA, i]
-            singular, sat_v, sat_w = held[HELD_SINGULAR, i], held[HELD_SAT_V, i], held[HELD_SAT_OMEGA, i]
-        else:
-            v, omega, _, singular, sat_v, sat_w, _, _ = command_at(
-                law, x, y, theta, xi, ref, gains_of(gains, i), limits[0, i], limits[1, i])
-        ex = ref[REF_X] - x
-        ey = ref[REF_Y] - y
-        e = math.sqrt(ex * ex + ey * ey)
-        delta = e - stats[E_MEAN, i]
-        mean = stats[E_MEAN, i] + delta / (k + 1.0)
-        stats[E_MEAN, i] = mean
-        stats[E_M2, i] += delta * (e - mean)
-        stats[E_SQ, i] += e * e
-        stats[E_MAX, i] = max(stats[E_MAX, i], e)
-        stats[E_FINAL, i] = e
-        heading = abs(wrap_angle(ref[REF_THETA] - theta))
-        stats[H_SUM, i] += heading
-        stats[H_SQ, i] += heading * heading
-        stats[H_MAX, i] = max(stats[H_MAX, i], heading)
-        stats[H_FINAL, i] = heading
-        stats[V_PEAK, i] = max(stats[V_PEAK, i], abs(v))
-        stats[W_PEAK, i] = max(stats[W_PEAK, i], abs(omega))
-        stats[V_SQ, i] += v * v
-        stats[W_SQ, i] += omega * omega
-        stats[SAT_V, i] += sat_v
-        stats[SAT_W, i] += sat_w
-        stats[SINGULAR, i] += singular
-        stats[FIRST_SINGULAR, i] = min(stats[FIRST_SINGULAR, i], ref[0] if singular > 0.0 else np.inf)
-        if recording:
-            record[REC_X, k, i] = x
-            record[REC_Y, k, i] = y
-            record[REC_THETA, k, i] = theta
-            record[REC_XI, k, i] = xi
-            record[REC_V, k, i] = v
-            record[REC_OMEGA, k, i] = omega
+def pair_command(x, y, theta, p1x, p1y, p1theta, p1v, p2x, p2y, p2theta, p2v, l1_d, l2_d, l1_rate, l2_rate, k1, k2,
+                 d, sin_floor, v_max, omega_max):
+    """An l–l follower's saturated command and link state: (v, ω, sat v, sat ω, singular,
+    cos θ, sin θ, l1, l2, l̇1, l̇2, sin(γ1 − γ2))."""
+    sin_t, cos_t = sincos(theta)
+    l1, _, cos_phi_1, _, cos_g1, sin_g1 = link_geometry(p1x, p1y, p1theta, x, y, cos_t, sin_t, theta, d)
+    l2, _, cos_phi_2, _, cos_g2, sin_g2 = link_geometry(p2x, p2y, p2theta, x, y, cos_t, sin_t, theta, d)
+    v_raw, omega_raw, sin_difference, singular = separation_separation_law(
+        l1, l2, cos_phi_1, cos_phi_2, cos_g1, sin_g1, cos_g2, sin_g2, p1v, p2v, l1_d, l2_d, l1_rate, l2_rate, k1, k2,
+        d, sin_floor)
+    v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
+    l1_dot = separation_rate(v, omega, p1v, d, cos_phi_1, cos_g1, sin_g1)
+    l2_dot = separation_rate(v, omega, p2v, d, cos_phi_2, cos_g2, sin_g2)
+    return v, omega, sat_v, sat_w, singular, cos_t, sin_t, l1, l2, l1_dot, l2_dot, sin_difference
 
 
 @njit(inline="always", **_OPTIONS)
-def stage_rates(law, sampled_data, x, y, theta, xi, ref, gains_i, v_max, omega_max, held_command):
-    """(ẋ, ẏ, θ̇, ξ̇) at one RK4 stage: the law's command, or the held one."""
-    if sampled_data:
-        sin_t, cos_t = sincos(theta)
-        v, omega, xi_dot = held_command
-    else:
-        v, omega, xi_dot, _, _, _, cos_t, sin_t = command_at(law, x, y, theta, xi, ref, gains_i, v_max, omega_max)
-    dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
-    return dx, dy, dtheta, xi_dot
+def rk4_sum(value, sixth, k1, k2, k3, k4):
+    """The classical RK4 combination value + h/6 (k1 + 2 k2 + 2 k3 + k4)."""
+    return value + sixth * (k1 + 2.0 * (k2 + k3) + k4)
 
 
 @njit(inline="always", **_OPTIONS)
-def substep(law, sampled_data, state, rows, row, h, gains, limits, held):
-    """One classical RK4 sub-step of every robot, the four stages in registers."""
-    r0, r1, r2 = row_values(rows, row), row_values(rows, row + 1), row_values(rows, row + 2)
+def unicycle_step(x, y, theta, xi, v, omega, xi_dot, h):
+    """One RK4 step of the unicycle under a command held over the step (exact for ξ)."""
     half = 0.5 * h
-    for i in range(state.shape[1]):
-        x, y, theta, xi = state[0, i], state[1, i], state[2, i], state[3, i]
-        gains_i, v_max, omega_max = gains_of(gains, i), limits[0, i], limits[1, i]
-        held_command = (held[HELD_V, i], held[HELD_OMEGA, i], held[HELD_XI_DOT, i])
-        a1, b1, c1, d1 = stage_rates(law, sampled_data, x, y, theta, xi, r0, gains_i, v_max, omega_max, held_command)
-        a2, b2, c2, d2 = stage_rates(law, sampled_data, x + half * a1, y + half * b1, theta + half * c1,
-                                     xi + half * d1, r1, gains_i, v_max, omega_max, held_command)
-        a3, b3, c3, d3 = stage_rates(law, sampled_data, x + half * a2, y + half * b2, theta + half * c2,
-                                     xi + half * d2, r1, gains_i, v_max, omega_max, held_command)
-        a4, b4, c4, d4 = stage_rates(law, sampled_data, x + h * a3, y + h * b3, theta + h * c3, xi + h * d3, r2,
-                                     gains_i, v_max, omega_max, held_command)
-        sixth = h / 6.0
-        state[0, i] = x + sixth * (a1 + 2.0 * (a2 + a3) + a4)
-        state[1, i] = y + sixth * (b1 + 2.0 * (b2 + b3) + b4)
-        state[2, i] = theta + sixth * (c1 + 2.0 * (c2 + c3) + c4)
-        state[3, i] = xi + sixth * (d1 + 2.0 * (d2 + d3) + d4)
+    s1, c1 = sincos(theta)
+    s2, c2 = sincos(theta + half * omega)
+    s4, c4 = sincos(theta + h * omega)
+    sixth = h / 6.0
+    return (rk4_sum(x, sixth, v * c1, v * c2, v * c2, v * c4), rk4_sum(y, sixth, v * s1, v * s2, v * s2, v * s4),
+            theta + h * omega, xi + h * xi_dot)
+
+
+@njit(inline="always", **_OPTIONS)
+def parent_stage(stage_pose, stage_command, s, p, b):
+    """(x, y, θ, v, ω) of robot p at RK4 stage s (zeros for no parent, p < 0)."""
+    if p < 0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    return (stage_pose[s, 0, p, b], stage_pose[s, 1, p, b], stage_pose[s, 2, p, b], stage_command[s, 0, p, b],
+            stage_command[s, 1, p, b])
+
+
+@njit(**_OPTIONS)
+def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
+    """Keep a parent's four stage poses and commands (x, y, θ, v, ω) for its children."""
+    for s, values in enumerate((s0, s1, s2, s3)):
+        stage_pose[s, 0, r, b], stage_pose[s, 1, r, b], stage_pose[s, 2, r, b] = values[0], values[1], values[2]
+        stage_command[s, 0, r, b], stage_command[s, 1, r, b] = values[3], values[4]
 
 
 def stable_cache_identity(dispatcher, _seen=None) -> None:
@@ -207,54 +226,351 @@ def stable_cache_identity(dispatcher, _seen=None) -> None:
             stable_cache_identity(value, seen)
 
 
-def make_integrator(law, recording: bool):
-    """Compile (once, cached on disk) the functions that simulate robots under ``law``,
-    keeping trajectories in ``record`` if ``recording`` (a compile-time choice, so that
-    the statistics-only variant has no conditional stores).
+@njit(inline="always", **_OPTIONS)
+def idle_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    """The placeholder second law of a one-law kernel (never selected)."""
+    return 0.0, 0.0, 0.0, 0.0
 
-    Returns ``(law_rates, integrate, score)``:
 
-    * ``law_rates(state, rows, gains, limits, rates)``: state rates (4, n) of every robot
-      under the continuous-time law at the time of ``rows[0]`` (scipy's right-hand side);
-    * ``integrate(...)``: the RK4 time loop (see the module docstring);
-    * ``score(states, rows, gains, limits, stats, record)``: statistics of a trajectory
-      computed elsewhere (the scipy cross-check), by the same sampling code.
+IdleFields = namedtuple("IdleFields", ("unused",))
 
-    Only these closures capture ``law``: numba caches closures over module-level
+
+def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
+    """Compile (once, cached on disk) the functions that simulate a robot graph whose roots
+    run ``law_a`` or ``law_b`` (namedtuple classes ``gains_a``, ``gains_b`` of their fields)
+    and which has followers if ``followers`` (a compile-time choice: graphs of lone roots
+    compile no formation code).
+
+    Returns ``(integrate, evaluate, score)``:
+
+    * ``integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds,
+      order, parents, feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start,
+      k_stop, n_steps, stats, pair_stats, record, held, step_rate)``: the time loop;
+    * ``evaluate(state, fields, limits, ref_row, targets, target_row, offsets, kinds, order,
+      parents, branch, sin_floor, instant)``: every robot's command and outputs at one
+      instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``);
+    * ``score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch,
+      sin_floor, d_max, stats, pair_stats, record)``: statistics and record of a trajectory
+      computed elsewhere (the scipy cross-check, states (N+1, 4, R, B)), by the same code.
+
+    Only these closures capture the laws: numba caches closures over module-level
     functions across processes, not closures over other closures.
     """
-    stable_cache_identity(law)
+    stable_cache_identity(law_a)
+    stable_cache_identity(law_b)
+    n_a, n_b = len(gains_a._fields), len(gains_b._fields)
+    posture_a = gains_a._fields[:3] == ("goal_x", "goal_y", "goal_theta")
+    posture_b = gains_b._fields[:3] == ("goal_x", "goal_y", "goal_theta")
+
+    @njit(inline="always", **_OPTIONS)
+    def root_errors(posture, fields, r, b, x, y, theta, ref):
+        """(position error norm, signed heading error) against the reference or the goal."""
+        if posture:
+            gx, gy, gtheta = fields[0, r, b], fields[1, r, b], fields[2, r, b]
+        else:
+            gx, gy, gtheta = ref[REF_X], ref[REF_Y], ref[REF_THETA]
+        ex, ey = gx - x, gy - y
+        return math.sqrt(ex * ex + ey * ey), wrap_angle(gtheta - theta)
 
     @njit(**_OPTIONS)
-    def integrate(state, gains, limits, rows, row_start, substeps, dt, hold_every, k_start, k_stop, n_steps,
-                  stats, record, held):
+    def evaluate(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
+                 instant):
+        for position in range(order.size):
+            r = order[position]
+            kind = kinds[r]
+            p1, p2 = parents[0, r], parents[1, r]
+            for b in range(state.shape[2]):
+                x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                v_max, omega_max = limits[0, r, b], limits[1, r, b]
+                out1 = out2 = rate1 = rate2 = sin_gamma = singular = xi_dot = 0.0
+                if kind == ROOT_A or kind == ROOT_B:
+                    if kind == ROOT_A:
+                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
+                            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, v_max, omega_max)
+                        err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, ref)
+                    else:
+                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
+                            law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
+                        err1, err2 = root_errors(posture_b, fields, r, b, x, y, theta, ref)
+                elif followers and kind == SEPARATION_BEARING:
+                    z1_d = targets[target_row, 0, r] + offsets[0, r, b]
+                    z2_d = targets[target_row, 1, r] + offsets[1, r, b]
+                    v, omega, sat_v, sat_w, _, _, out1, out2, rate1, rate2 = bearing_command(
+                        x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
+                        instant[I_OMEGA, p1, b], branch[r, b], z1_d, z2_d, targets[target_row, 2, r],
+                        targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b], fields[OFFSET_D, r, b], v_max,
+                        omega_max)
+                    err1, err2 = out1 - z1_d, out2 - z2_d
+                else:
+                    z1_d = targets[target_row, 0, r] + offsets[0, r, b]
+                    z2_d = targets[target_row, 1, r] + offsets[1, r, b]
+                    v, omega, sat_v, sat_w, singular, _, _, out1, out2, rate1, rate2, sin_gamma = pair_command(
+                        x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
+                        state[0, p2, b], state[1, p2, b], state[2, p2, b], instant[I_V, p2, b], z1_d, z2_d,
+                        targets[target_row, 2, r], targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b],
+                        fields[OFFSET_D, r, b], sin_floor, v_max, omega_max)
+                    err1, err2 = out1 - z1_d, out2 - z2_d
+                instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_XI_DOT, r, b] = v, omega, xi_dot
+                instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b] = singular, sat_v, sat_w
+                instant[I_OUT1, r, b], instant[I_OUT2, r, b] = out1, out2
+                instant[I_ERR1, r, b], instant[I_ERR2, r, b] = err1, err2
+                instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b] = rate1, rate2, sin_gamma
+
+    @njit(inline="always", **_OPTIONS)
+    def accumulate(state, instant, held, sampled_data, t, k, kinds, fields, d_max, stats, pair_stats, record,
+                   recording):
+        """Add every robot's sample at output step k (time t) to its statistics and record."""
+        n_robots, n_batch = state.shape[1], state.shape[2]
+        for r in range(n_robots):
+            for b in range(n_batch):
+                if sampled_data:
+                    v, omega = held[HELD_V, r, b], held[HELD_OMEGA, r, b]
+                    singular, sat_v, sat_w = held[HELD_SINGULAR, r, b], held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b]
+                else:
+                    v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
+                    singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
+                e = abs(instant[I_ERR1, r, b])
+                delta = e - stats[E_MEAN, r, b]
+                mean = stats[E_MEAN, r, b] + delta / (k + 1.0)
+                stats[E_MEAN, r, b] = mean
+                stats[E_M2, r, b] += delta * (e - mean)
+                stats[E_SQ, r, b] += e * e
+                stats[E_MAX, r, b] = max(stats[E_MAX, r, b], e)
+                stats[E_FINAL, r, b] = e
+                heading = abs(instant[I_ERR2, r, b])
+                stats[H_SUM, r, b] += heading
+                stats[H_SQ, r, b] += heading * heading
+                stats[H_MAX, r, b] = max(stats[H_MAX, r, b], heading)
+                stats[H_FINAL, r, b] = heading
+                speed, turn = abs(v), abs(omega)
+                stats[V_PEAK_T, r, b] = t if speed > stats[V_PEAK, r, b] else stats[V_PEAK_T, r, b]
+                stats[V_PEAK, r, b] = max(stats[V_PEAK, r, b], speed)
+                stats[W_PEAK_T, r, b] = t if turn > stats[W_PEAK, r, b] else stats[W_PEAK_T, r, b]
+                stats[W_PEAK, r, b] = max(stats[W_PEAK, r, b], turn)
+                stats[V_SQ, r, b] += v * v
+                stats[W_SQ, r, b] += omega * omega
+                stats[SAT_V, r, b] += sat_v
+                stats[SAT_W, r, b] += sat_w
+                stats[SINGULAR, r, b] += singular
+                stats[FIRST_SINGULAR, r, b] = min(stats[FIRST_SINGULAR, r, b], t if singular > 0.0 else np.inf)
+                if recording:
+                    record[REC_X, k, r, b] = state[0, r, b]
+                    record[REC_Y, k, r, b] = state[1, r, b]
+                    record[REC_THETA, k, r, b] = state[2, r, b]
+                    record[REC_XI, k, r, b] = state[3, r, b]
+                    record[REC_V, k, r, b] = v
+                    record[REC_OMEGA, k, r, b] = omega
+                    record[REC_OUT1, k, r, b] = instant[I_OUT1, r, b]
+                    record[REC_OUT2, k, r, b] = instant[I_OUT2, r, b]
+                    record[REC_ERR1, k, r, b] = instant[I_ERR1, r, b]
+                    record[REC_ERR2, k, r, b] = instant[I_ERR2, r, b]
+                    record[REC_RATE1, k, r, b] = instant[I_RATE1, r, b]
+                    record[REC_RATE2, k, r, b] = instant[I_RATE2, r, b]
+                    record[REC_SIN_GAMMA, k, r, b] = instant[I_SIN_GAMMA, r, b]
+                    record[REC_SINGULAR, k, r, b] = singular
+                    record[REC_SATURATED, k, r, b] = sat_v + 2.0 * sat_w
+        if followers:
+            for r in range(n_robots):
+                if kinds[r] == SEPARATION_SEPARATION:
+                    for b in range(n_batch):
+                        s = abs(instant[I_SIN_GAMMA, r, b])
+                        stats[MIN_SIN_T, r, b] = t if s < stats[MIN_SIN, r, b] else stats[MIN_SIN_T, r, b]
+                        stats[MIN_SIN, r, b] = min(stats[MIN_SIN, r, b], s)
+            if n_robots > 1:
+                for b in range(n_batch):
+                    closest, first, second = np.inf, -1, -1
+                    for r in range(n_robots):
+                        near, who = np.inf, -1
+                        for q in range(n_robots):
+                            if q != r:
+                                dx, dy = state[0, q, b] - state[0, r, b], state[1, q, b] - state[1, r, b]
+                                distance = math.sqrt(dx * dx + dy * dy)
+                                if distance < near:
+                                    near, who = distance, q
+                        if near < stats[NEAR, r, b]:
+                            stats[NEAR, r, b], stats[NEAR_T, r, b], stats[NEAR_WHO, r, b] = near, t, who
+                        if kinds[r] >= SEPARATION_BEARING and near < 2.0 * fields[OFFSET_D, r, b]:
+                            stats[BELOW_2D, r, b] += 1.0
+                        if near < closest:
+                            closest, first, second = near, min(r, who), max(r, who)
+                    if closest < pair_stats[CLOSEST, b]:
+                        pair_stats[CLOSEST, b], pair_stats[CLOSEST_T, b] = closest, t
+                        pair_stats[CLOSEST_I, b], pair_stats[CLOSEST_J, b] = first, second
+                    if closest < 2.0 * d_max[b]:
+                        pair_stats[BELOW_ANY, b] += 1.0
+
+    @njit(inline="always", **_OPTIONS)
+    def root_stage(kind, fields, r, b, x, y, theta, xi, ref, v_max, omega_max):
+        """(ẋ, ẏ, θ̇, ξ̇, v, ω) of a root at one RK4 stage."""
+        if kind == ROOT_A:
+            v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(
+                law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, v_max, omega_max)
+        else:
+            v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(
+                law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
+        dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
+        return dx, dy, dtheta, xi_dot, v, omega
+
+    @njit(inline="always", **_OPTIONS)
+    def follower_stage(kind, x, y, theta, parent_1, parent_2, branch, target, k1, k2, d, sin_floor, v_max, omega_max):
+        """(ẋ, ẏ, θ̇, v, ω) of a follower at one RK4 stage; ``parent_i`` = (x, y, θ, v, ω) of
+        its parents at that stage, ``target`` = (z1_d, z2_d, ż1_d, ż2_d)."""
+        if kind == SEPARATION_BEARING:
+            v, omega, _, _, cos_t, sin_t, _, _, _, _ = bearing_command(
+                x, y, theta, parent_1[0], parent_1[1], parent_1[2], parent_1[3], parent_1[4], branch, target[0],
+                target[1], target[2], target[3], k1, k2, d, v_max, omega_max)
+        else:
+            v, omega, _, _, _, cos_t, sin_t, _, _, _, _, _ = pair_command(
+                x, y, theta, parent_1[0], parent_1[1], parent_1[2], parent_1[3], parent_2[0], parent_2[1],
+                parent_2[2], parent_2[3], target[0], target[1], target[2], target[3], k1, k2, d, sin_floor, v_max,
+                omega_max)
+        dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
+        return dx, dy, dtheta, v, omega
+
+    @njit(inline="always", **_OPTIONS)
+    def substep(state, fields, limits, rows, row, h, targets, offsets, kinds, order, parents, feeds, branch,
+                sin_floor, xi_speed, sampled_data, held, stage_pose, stage_command):
+        """One classical RK4 sub-step of every robot (parents first); returns the fastest
+        rate met (only measured for graphs with followers)."""
+        r0, r1, r2 = row_values(rows, row), row_values(rows, row + 1), row_values(rows, row + 2)
+        half, sixth = 0.5 * h, h / 6.0
+        peak = 0.0
+        n_batch = state.shape[2]
+        for position in range(order.size):
+            r = order[position]
+            kind = kinds[r]
+            if sampled_data:
+                for b in range(n_batch):
+                    omega = held[HELD_OMEGA, r, b]
+                    state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = unicycle_step(
+                        state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b], held[HELD_V, r, b], omega,
+                        held[HELD_XI_DOT, r, b], h)
+                    if followers:
+                        peak = max(peak, abs(omega))
+            elif kind == ROOT_A or kind == ROOT_B:
+                feeding = followers and feeds[r] != 0
+                for b in range(n_batch):
+                    x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                    v_max, omega_max = limits[0, r, b], limits[1, r, b]
+                    a1, b1, c1, d1, v1, w1 = root_stage(kind, fields, r, b, x, y, theta, xi, r0, v_max, omega_max)
+                    x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * d1
+                    a2, b2, c2, d2, v2, w2 = root_stage(kind, fields, r, b, x2, y2, t2, xi2, r1, v_max, omega_max)
+                    x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * d2
+                    a3, b3, c3, d3, v3, w3 = root_stage(kind, fields, r, b, x3, y3, t3, xi3, r1, v_max, omega_max)
+                    x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * d3
+                    a4, b4, c4, d4, v4, w4 = root_stage(kind, fields, r, b, x4, y4, t4, xi4, r2, v_max, omega_max)
+                    state[0, r, b] = rk4_sum(x, sixth, a1, a2, a3, a4)
+                    state[1, r, b] = rk4_sum(y, sixth, b1, b2, b3, b4)
+                    state[2, r, b] = rk4_sum(theta, sixth, c1, c2, c3, c4)
+                    state[3, r, b] = rk4_sum(xi, sixth, d1, d2, d3, d4)
+                    if followers:
+                        peak = max(peak, abs(w1), abs(w2), abs(w3), abs(w4),
+                                   xi_speed * max(abs(d1) / max(abs(xi), 1e-300), abs(d2) / max(abs(xi2), 1e-300),
+                                                  abs(d3) / max(abs(xi3), 1e-300), abs(d4) / max(abs(xi4), 1e-300)))
+                        if feeding:
+                            store_stages(stage_pose, stage_command, r, b, (x, y, theta, v1, w1), (x2, y2, t2, v2, w2),
+                                         (x3, y3, t3, v3, w3), (x4, y4, t4, v4, w4))
+            elif followers:
+                # Followers are few and their laws long: their four stages run as a loop (not
+                # unrolled), which keeps the compiled code small.
+                feeding = feeds[r] != 0
+                p1, p2 = parents[0, r], parents[1, r]
+                for b in range(n_batch):
+                    x, y, theta = state[0, r, b], state[1, r, b], state[2, r, b]
+                    v_max, omega_max = limits[0, r, b], limits[1, r, b]
+                    k1, k2, d = fields[K1, r, b], fields[K2, r, b], fields[OFFSET_D, r, b]
+                    o1, o2, bearing = offsets[0, r, b], offsets[1, r, b], branch[r, b]
+                    dx = dy = dtheta = 0.0
+                    sum_x = sum_y = sum_theta = 0.0
+                    for s in range(4):
+                        weight = 0.0 if s == 0 else (half if s < 3 else h)
+                        sx, sy, st = x + weight * dx, y + weight * dy, theta + weight * dtheta
+                        tr = row + (s + 1) // 2
+                        target = (targets[tr, 0, r] + o1, targets[tr, 1, r] + o2, targets[tr, 2, r], targets[tr, 3, r])
+                        dx, dy, dtheta, v, omega = follower_stage(
+                            kind, sx, sy, st, parent_stage(stage_pose, stage_command, s, p1, b),
+                            parent_stage(stage_pose, stage_command, s, p2, b), bearing, target, k1, k2, d, sin_floor,
+                            v_max, omega_max)
+                        coefficient = 1.0 if s == 0 or s == 3 else 2.0
+                        sum_x += coefficient * dx
+                        sum_y += coefficient * dy
+                        sum_theta += coefficient * dtheta
+                        peak = max(peak, abs(omega))
+                        if feeding:
+                            stage_pose[s, 0, r, b], stage_pose[s, 1, r, b], stage_pose[s, 2, r, b] = sx, sy, st
+                            stage_command[s, 0, r, b], stage_command[s, 1, r, b] = v, omega
+                    state[0, r, b] = x + sixth * sum_x
+                    state[1, r, b] = y + sixth * sum_y
+                    state[2, r, b] = theta + sixth * sum_theta
+        if followers:
+            update_branches(state, fields, kinds, parents, branch)
+        return peak
+
+    @njit(inline="always", **_OPTIONS)
+    def update_branches(state, fields, kinds, parents, branch):
+        """Move every l–φ bearing branch to the bearing at the current state."""
+        for r in range(kinds.size):
+            if kinds[r] != SEPARATION_BEARING:
+                continue
+            p = parents[0, r]
+            for b in range(state.shape[2]):
+                theta = state[2, r, b]
+                sin_t, cos_t = sincos(theta)
+                _, raw, _, _, _, _ = link_geometry(state[0, p, b], state[1, p, b], state[2, p, b], state[0, r, b],
+                                                  state[1, r, b], cos_t, sin_t, theta, fields[OFFSET_D, r, b])
+                branch[r, b] = continuous_bearing(raw, branch[r, b])
+
+    @njit(**_OPTIONS)
+    def integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
+                  branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
+                  record, held, step_rate):
         sampled_data = hold_every != 0
+        recording = record.shape[1] != 0
+        n_robots, n_batch = state.shape[1], state.shape[2]
+        instant = np.zeros((INSTANT_COUNT, n_robots, n_batch))
+        scratch = n_robots if followers else 0
+        stage_pose = np.zeros((4, 3, scratch, n_batch))
+        stage_command = np.zeros((4, 2, scratch, n_batch))
         for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
+            ref = row_values(rows, row)
+            evaluate(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
+                     instant)
             if sampled_data and k % hold_every == 0:
-                refresh_held(law, state, row_values(rows, row), gains, limits, held)
-            sample_step(law, recording, sampled_data, state, row_values(rows, row), gains, limits, held, stats,
-                        record, k)
+                for r in range(n_robots):
+                    for b in range(n_batch):
+                        held[HELD_V, r, b], held[HELD_OMEGA, r, b] = instant[I_V, r, b], instant[I_OMEGA, r, b]
+                        held[HELD_XI_DOT, r, b], held[HELD_SINGULAR, r, b] = instant[I_XI_DOT, r, b], instant[I_SINGULAR, r, b]
+                        held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b] = instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
+            accumulate(state, instant, held, sampled_data, ref[0], k, kinds, fields, d_max, stats, pair_stats, record,
+                       recording)
             if k == n_steps:
                 break
             m = substeps[k]
             for j in range(m):
-                substep(law, sampled_data, state, rows, row + 2 * j, dt / m, gains, limits, held)
+                rate = substep(state, fields, limits, rows, row + 2 * j, dt / m, targets, offsets, kinds, order, parents,
+                               feeds, branch, sin_floor, xi_speed, sampled_data, held, stage_pose, stage_command)
+                if followers:
+                    step_rate[k] = max(step_rate[k], rate)
+            if followers:
+                for r in range(n_robots):
+                    for b in range(n_batch):
+                        step_rate[k] = max(step_rate[k], abs(instant[I_OMEGA, r, b]))
 
     @njit(**_OPTIONS)
-    def law_rates(state, rows, gains, limits, rates):
-        ref = row_values(rows, 0)
-        for i in range(state.shape[1]):
-            v, omega, xi_dot, _, _, _, cos_t, sin_t = command_at(
-                law, state[0, i], state[1, i], state[2, i], state[3, i], ref, gains_of(gains, i), limits[0, i],
-                limits[1, i])
-            rates[0, i], rates[1, i], rates[2, i] = unicycle_rates(v, omega, cos_t, sin_t)
-            rates[3, i] = xi_dot
-
-    @njit(**_OPTIONS)
-    def score(states, rows, gains, limits, stats, record):
-        held = np.zeros((6, states.shape[2]))
+    def score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max, stats,
+              pair_stats, record):
+        n_robots, n_batch = states.shape[2], states.shape[3]
+        instant = np.zeros((INSTANT_COUNT, n_robots, n_batch))
+        held = np.zeros((HELD_COUNT, n_robots, n_batch))
+        recording = record.shape[1] != 0
         for k in range(states.shape[0]):
-            sample_step(law, recording, False, states[k], row_values(rows, k), gains, limits, held, stats, record, k)
+            state = states[k]
+            if followers:
+                update_branches(state, fields, kinds, parents, branch)
+            ref = row_values(rows, k)
+            evaluate(state, fields, limits, ref, targets, k, offsets, kinds, order, parents, branch, sin_floor, instant)
+            accumulate(state, instant, held, False, ref[0], k, kinds, fields, d_max, stats, pair_stats, record,
+                       recording)
 
-    return law_rates, integrate, score
+    return integrate, evaluate, score

@@ -8,6 +8,9 @@ if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.b
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from nonholo.sim.metrics import goal_errors  # noqa: E402
+from nonholo.sim.scenario import Follower, Robot  # noqa: E402
+
 # Start-up transients can be 100× the steady commands; the v and ω panels show the
 # central 99 % of the samples and state the clipped peak in their title.
 ROBUST_PERCENTILES = (0.5, 99.5)
@@ -26,8 +29,11 @@ def robust_limits(ax, series, unit: str, title: str) -> None:
     ax.set_title(title)
 
 
-def plot_result(result, robots=None, path=None, max_robots: int = 8):
-    """Four panels: path in the plane, error norm, v and ω against time."""
+def plot_result(result, path=None, robots=None, member: int = 0, max_robots: int = 8, snapshots: int = 6):
+    """Four panels: path in the plane, errors, v and ω against time (formation snapshots
+    and output errors when the scenario has followers or posture roots)."""
+    if result.scenario.followers or any(r.posture for r in result.scenario.roots):
+        return plot_formation(result, path, member, snapshots)
     indices = [result.index(r) for r in robots] if robots is not None else list(range(min(max_robots, len(result.names))))
     fig, axes = plt.subplots(2, 2, figsize=(12, 9), constrained_layout=True)
     ax_path, ax_err, ax_v, ax_w = axes.ravel()
@@ -64,3 +70,147 @@ def plot_result(result, robots=None, path=None, max_robots: int = 8):
         fig.savefig(path, dpi=120)
         plt.close(fig)
     return fig
+
+
+def _robot_marker(ax, x, y, theta, color, size=0.6):
+    """A triangle pointing along the heading, centred on the axle midpoint."""
+    c, s = np.cos(theta), np.sin(theta)
+    body = np.array([[1.2, 0.0], [-0.6, 0.6], [-0.6, -0.6]]) * size
+    points = np.column_stack([x + c * body[:, 0] - s * body[:, 1], y + s * body[:, 0] + c * body[:, 1]])
+    return ax.fill(points[:, 0], points[:, 1], color=color, alpha=0.8, lw=0)
+
+
+def _links(formation):
+    names = formation.names
+    return [(names.index(p), i) for i, r in enumerate(formation.robots) if isinstance(r, Follower) for p in r.leaders]
+
+
+def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
+    formation = result.formations[member]
+    t = result.t
+    x, y, theta = (result.trajectory(f, member) for f in ("x", "y", "theta"))
+    v, omega = result.trajectory("v", member), result.trajectory("omega", member)
+    fig, axes = plt.subplots(2, 2, figsize=(12, 9), constrained_layout=True)
+    ax_path, ax_err, ax_v, ax_w = axes.ravel()
+    if result.reference_rows is not None:
+        ax_path.plot(result.reference_rows[:, 1], result.reference_rows[:, 2], "k--", lw=1, label="reference")
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, robot in enumerate(formation.robots):
+        color = colors[i % len(colors)]
+        role = robot.controller.name if isinstance(robot, Robot) else robot.law
+        ax_path.plot(x[i], y[i], color=color, lw=1.1, label=f"{robot.name} ({role})")
+        ax_v.plot(t, v[i], color=color, lw=1, label=robot.name)
+        ax_w.plot(t, omega[i], color=color, lw=1, label=robot.name)
+        if isinstance(robot, Robot) and robot.posture:
+            ax_path.plot(*robot.goal[:2], "*", color=color, ms=14)
+            distance, _ = goal_errors(x[i], y[i], theta[i], robot.goal)
+            ax_err.semilogy(t, np.maximum(distance, 1e-16), color=color, lw=1.2, label=f"{robot.name}: distance to goal (m)")
+        elif isinstance(robot, Follower):
+            e1, e2 = result.output_errors(i, member)
+            unit = "rad" if robot.outputs[1] == "phi" else "m"
+            ax_err.semilogy(t, np.maximum(np.abs(e1), 1e-16), color=color, lw=1.2, label=f"{robot.name}: |{robot.outputs[0]} error| (m)")
+            ax_err.semilogy(t, np.maximum(np.abs(e2), 1e-16), color=color, lw=1.2, ls="--",
+                            label=f"{robot.name}: |{robot.outputs[1]} error| ({unit})")
+    for k in np.linspace(0, t.size - 1, snapshots).astype(int):
+        for i in range(len(formation.robots)):
+            _robot_marker(ax_path, x[i, k], y[i, k], theta[i, k], colors[i % len(colors)])
+        for parent, child in _links(formation):
+            d = formation.robots[child].d
+            px, py = x[child, k] + d * np.cos(theta[child, k]), y[child, k] + d * np.sin(theta[child, k])
+            ax_path.plot([x[parent, k], px], [y[parent, k], py], color="0.4", lw=0.7)
+    ax_path.set(xlabel="x (m)", ylabel="y (m)", title="Paths (markers: snapshots; grey: leader axle → castor point)",
+                aspect="equal")
+    ax_err.set(xlabel="time (s)", ylabel="|error|", title="Formation output errors" if formation.followers else "Goal distance")
+    ax_v.set(xlabel="time (s)", ylabel="v (m/s)", title="Driving speed demands")
+    ax_w.set(xlabel="time (s)", ylabel=r"$\omega$ (rad/s)", title="Turn-rate demands")
+    for ax in (ax_v, ax_w):
+        peak = np.abs(ax.lines[0].get_ydata()).max() if ax.lines else 1.0
+        steady = max(np.percentile(np.abs(np.concatenate([ln.get_ydata() for ln in ax.lines])), 99), 1e-3)
+        if peak > 20 * steady:   # a start transient would flatten everything else
+            ax.set_ylim(-3 * steady, 3 * steady)
+            ax.set_title(ax.get_title() + " (clipped; peaks in JSON)")
+    for ax in axes.ravel():
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"{formation.name}: {len(formation.robots)} robots, {t[-1]:.5g} s, dt = {formation.dt:g} s")
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
+def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0, progress: bool = False):
+    """Write an animated GIF: robots as triangles, trails of ``trail`` seconds, links."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    formation = result.formations[member]
+    t = result.t
+    x, y, theta = (result.trajectory(f, member) for f in ("x", "y", "theta"))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, ax = plt.subplots(figsize=(6, 6))
+    margin = 2.0
+    ax.set(xlim=(x.min() - margin, x.max() + margin), ylim=(y.min() - margin, y.max() + margin), aspect="equal",
+           xlabel="x (m)", ylabel="y (m)")
+    ax.grid(True, alpha=0.3)
+    if result.reference_rows is not None:
+        ax.plot(result.reference_rows[:, 1], result.reference_rows[:, 2], "k--", lw=0.8)
+    indices = np.linspace(0, t.size - 1, frames).astype(int)
+    trail_steps = max(1, int(trail / formation.dt))
+    links = _links(formation)
+
+    def draw(k):
+        for artist in list(ax.patches) + [ln for ln in ax.lines if ln.get_gid() == "dynamic"]:
+            artist.remove()
+        for i, robot in enumerate(formation.robots):
+            color = colors[i % len(colors)]
+            start = max(0, k - trail_steps)
+            ln, = ax.plot(x[i, start:k + 1], y[i, start:k + 1], color=color, lw=1)
+            ln.set_gid("dynamic")
+            _robot_marker(ax, x[i, k], y[i, k], theta[i, k], color)
+        for parent, child in links:
+            d = formation.robots[child].d
+            ln, = ax.plot([x[parent, k], x[child, k] + d * np.cos(theta[child, k])],
+                          [y[parent, k], y[child, k] + d * np.sin(theta[child, k])], color="0.4", lw=0.7)
+            ln.set_gid("dynamic")
+        ax.set_title(f"{formation.name}: t = {t[k]:.1f} s")
+        return []
+
+    animation = FuncAnimation(fig, lambda j: draw(indices[j]), frames=len(indices), blit=False)
+    animation.save(path, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return path
+
+
+def result_html(result) -> str:
+    """A small HTML table of the roots' and followers' main figures and the figure (Jupyter)."""
+    import base64
+    import html
+    import io
+
+    summary = result.to_dict()
+    rows = []
+    for name, robot in list(summary["robots"].items())[:20]:
+        if robot["role"] == "follower":
+            f = robot["formation"]
+            errors = "; ".join(f"{key[:-6]} {value['mean']:.3g}/{value['max']:.3g}/{value['final']:.3g}"
+                               for key, value in f.items() if key.endswith("_error"))
+            what = f"{robot['formation_law']} of {', '.join(f['leaders'])}"
+        elif "posture" in robot:
+            errors = f"goal distance final {robot['posture']['position_error']['final']:.3g} m"
+            what = robot["controller"]
+        else:
+            e = robot["error"]
+            errors = f"{e['mean']:.3g}/{e['max']:.3g}/{e['final']:.3g} m"
+            what = robot["controller"]
+        rows.append(f"<tr><td>{html.escape(name)}</td><td>{html.escape(what)}</td><td>{html.escape(errors)}</td>"
+                    f"<td>{robot['control']['peak_v']:.3g}</td><td>{robot['control']['peak_omega']:.3g}</td></tr>")
+    image = ""
+    if result.record is not None:
+        buffer = io.BytesIO()
+        figure = result.plot()
+        figure.savefig(buffer, format="png", dpi=60)
+        plt.close(figure)
+        image = f'<img src="data:image/png;base64,{base64.b64encode(buffer.getvalue()).decode()}"/>'
+    return (f"<p>{html.escape(repr(result))}</p><table><tr><th>robot</th><th>law</th>"
+            "<th>error mean/max/final</th><th>peak v (m/s)</th><th>peak ω (rad/s)</th></tr>"
+            + "".join(rows) + "</table>" + image)

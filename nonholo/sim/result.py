@@ -1,16 +1,28 @@
-"""Simulation results: arrays, metrics and plots."""
+"""The one result type of every run: trajectories per robot, tracking, posture and formation
+metrics, events, JSON, a tidy per-sample table, figures."""
 from __future__ import annotations
 
+import csv
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from nonholo.control.posture import HEADING_CONTROLLED
 from nonholo.references.feedforward import REF_COLUMNS
 from nonholo.sim import kernel as k
-from nonholo.sim.scenario import Scenario
+from nonholo.sim import metrics as m
+from nonholo.sim.scenario import Follower, Robot, Scenario
+from nonholo.sim.targets import target_segments
 
-TRAJECTORY_FIELDS = ("x", "y", "theta", "xi", "v", "omega")
+TRAJECTORY_FIELDS = {"x": k.REC_X, "y": k.REC_Y, "theta": k.REC_THETA, "xi": k.REC_XI, "v": k.REC_V,
+                     "omega": k.REC_OMEGA}
+HEADING_NOTE = ("the dynamic-feedback posture law regulates the position only: the final heading is not "
+                "controlled (the robot arrives along the goal's x-axis, heading θ_g or θ_g + π)")
+# Columns of the tidy table: (name, unit, record field).
+TABLE_COLUMNS = (("x", "m", k.REC_X), ("y", "m", k.REC_Y), ("theta", "rad", k.REC_THETA), ("xi", "", k.REC_XI),
+                 ("v", "m/s", k.REC_V), ("omega", "rad/s", k.REC_OMEGA), ("error_1", "", k.REC_ERR1),
+                 ("error_2", "", k.REC_ERR2))
 
 
 def _none_if_inf(value: float):
@@ -19,14 +31,16 @@ def _none_if_inf(value: float):
 
 @dataclass(frozen=True)
 class Metrics:
-    """Per-robot metrics (arrays over robots), sampled on the uniform grid t_k = k·dt.
+    """Per-robot metrics (arrays over robots, and over batch members for a batch), sampled
+    on the uniform grid t_k = k·dt.
 
-    ``error_*``: position-error norm ‖(x_d − x, y_d − y)‖ (m): mean, std (ddof 0), var,
-    rms, max, final. ``heading_*``: |wrap(θ_d − θ)| (rad): mean, rms, max, final.
-    ``peak_v``, ``peak_omega``, ``rms_v``, ``rms_omega``: commands applied (after
-    saturation); ``effort`` = duration · mean(v² + ω²). ``saturated_v``/``saturated_omega``:
-    samples at which the limit clipped the command; ``singular``: samples at which a
-    singularity guard acted (dynamic feedback |ξ| < ξ_min), ``first_singular`` its first
+    ``error_*``: a root's position-error norm ‖(x_d − x, y_d − y)‖ (m) — to the reference, or
+    to the goal for a posture root — and a follower's first output error |z1 − z1_d|: mean,
+    std (ddof 0), var, rms, max, final. ``heading_*``: a root's |wrap(θ_d − θ)| (rad), a
+    follower's |z2 − z2_d|: mean, rms, max, final. ``peak_v``, ``peak_omega``, ``rms_v``,
+    ``rms_omega``: commands applied (after saturation); ``effort`` = duration · mean(v² + ω²).
+    ``saturated_v``/``saturated_omega``: samples at which the limit clipped the command;
+    ``singular``: samples at which a singularity guard acted, ``first_singular`` its first
     time (inf if never).
     """
 
@@ -65,94 +79,281 @@ class Metrics:
             singular=stats[k.SINGULAR].astype(np.int64), first_singular=stats[k.FIRST_SINGULAR],
         )
 
-    def robot(self, i: int, samples: int) -> dict:
-        """JSON-ready metrics of robot ``i``."""
-        return {
-            "error": {s: float(getattr(self, f"error_{s}")[i]) for s in ("mean", "std", "var", "rms", "max", "final")},
-            "heading_error": {s: float(getattr(self, f"heading_{s}")[i]) for s in ("mean", "rms", "max", "final")},
-            "control": {"peak_v": float(self.peak_v[i]), "peak_omega": float(self.peak_omega[i]),
-                        "rms_v": float(self.rms_v[i]), "rms_omega": float(self.rms_omega[i]),
-                        "effort": float(self.effort[i])},
-            "events": {"saturated_v_samples": int(self.saturated_v[i]),
-                       "saturated_omega_samples": int(self.saturated_omega[i]),
-                       "saturated_fraction": float(max(self.saturated_v[i], self.saturated_omega[i]) / samples),
-                       "singular_samples": int(self.singular[i]),
-                       "first_singular_time": _none_if_inf(self.first_singular[i])},
-        }
-
 
 @dataclass(frozen=True)
 class SimulationResult:
     """What ``simulate`` returns.
 
-    ``t`` (N+1,) the output grid; ``reference_rows`` (N+1, 10) the reference on it
-    (columns ``REF_COLUMNS``); ``metrics`` per robot; trajectories (robots × N+1 arrays
-    ``x, y, theta, xi, v, omega``) when recorded.
+    ``t`` (N+1,) the output grid; ``reference_rows`` (N+1, 10) the reference on it (columns
+    ``REF_COLUMNS``; None without a reference); ``stats`` (STAT_COUNT, robots, members) the
+    kernel's running statistics; ``pair_stats`` (PAIR_COUNT, formations, members) the
+    closest pair of each connected formation; ``record`` (REC_COUNT, N+1, robots, members)
+    when recorded; ``substeps`` (robots,) the most RK4 sub-steps per output step used.
+    ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 
-    scenario: Scenario
+    scenarios: tuple[Scenario, ...]
     t: np.ndarray
-    reference_rows: np.ndarray
+    reference_rows: np.ndarray | None
     stats: np.ndarray
+    pair_stats: np.ndarray
     record: np.ndarray | None
     substeps: np.ndarray
     elapsed_s: float
-    metrics: Metrics = field(init=False)
+    metrics: Metrics = field(init=False, repr=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "metrics", Metrics.from_stats(self.stats, self.t.size, float(self.t[-1])))
+        stats = self.stats[:, :, 0] if len(self.scenarios) == 1 else self.stats
+        object.__setattr__(self, "metrics", Metrics.from_stats(stats, self.t.size, float(self.t[-1])))
+
+    # ------------------------------------------------------------------ access
+    @property
+    def scenario(self) -> Scenario:
+        return self.scenarios[0]
+
+    formation = scenario      # the thesis's word for a scenario with followers
+    formations = property(lambda self: list(self.scenarios))
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(r.name for r in self.scenario.robots)
+        return self.scenario.names
 
     def index(self, robot: str | int) -> int:
-        if isinstance(robot, int):
-            return robot
+        if isinstance(robot, (int, np.integer)):
+            return int(robot)
         try:
             return self.names.index(robot)
         except ValueError:
-            raise KeyError(f"no robot named {robot!r} (robots: {', '.join(self.names)})") from None
+            raise KeyError(f"no robot named {robot!r} (robots: {', '.join(self.names)})"[:300]) from None
 
-    def trajectory(self, name: str) -> np.ndarray:
-        """(robots, N+1) array of ``x, y, theta, xi, v`` or ``omega``."""
+    def _recorded(self) -> np.ndarray:
         if self.record is None:
             raise ValueError("trajectories were not recorded (simulate(..., record=True))")
-        return self.record[TRAJECTORY_FIELDS.index(name)].T
+        return self.record
+
+    def field(self, index: int, member: int = 0) -> np.ndarray:
+        """(robots, N+1) array of record field ``index`` (``nonholo.sim.kernel.REC_*``)."""
+        return self._recorded()[index, :, :, member].T
+
+    def trajectory(self, name: str, member: int = 0) -> np.ndarray:
+        """(robots, N+1) array of ``x, y, theta, xi, v`` or ``omega``."""
+        return self.field(TRAJECTORY_FIELDS[name], member)
 
     def __getattr__(self, name):
         if name in TRAJECTORY_FIELDS:
             return self.trajectory(name)
-        if name in REF_COLUMNS[1:]:
+        if name in REF_COLUMNS[1:] and self.reference_rows is not None:
             return self.reference_rows[:, REF_COLUMNS.index(name)]
         raise AttributeError(name)
 
-    def error_norm(self) -> np.ndarray:
-        """(robots, N+1) position-error norm on the grid."""
-        return np.hypot(self.x_d - self.x, self.y_d - self.y)
+    def error_norm(self, member: int = 0) -> np.ndarray:
+        """(robots, N+1) position-error norm of the roots (to the reference or the goal)."""
+        return np.abs(self.field(k.REC_ERR1, member))
 
-    def to_dict(self) -> dict:
-        """JSON-ready summary: per robot its controller, gains and metrics."""
+    def outputs(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """The link outputs (l, φ) or (l1, l2) of a follower over time (φ continuous)."""
+        i = self.index(robot)
+        return self._recorded()[k.REC_OUT1, :, i, member], self._recorded()[k.REC_OUT2, :, i, member]
+
+    def output_errors(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Signed output errors z − z_d of a follower over time (φ on its continuous branch)."""
+        i = self.index(robot)
+        return self._recorded()[k.REC_ERR1, :, i, member], self._recorded()[k.REC_ERR2, :, i, member]
+
+    def output_rates(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(l̇, φ̇) or (l̇1, l̇2) from the follower kinematics at the applied commands."""
+        i = self.index(robot)
+        return self._recorded()[k.REC_RATE1, :, i, member], self._recorded()[k.REC_RATE2, :, i, member]
+
+    def sin_gamma_difference(self, robot, member: int = 0) -> np.ndarray:
+        return self._recorded()[k.REC_SIN_GAMMA, :, self.index(robot), member]
+
+    # ------------------------------------------------------------------ metrics
+    def _stat(self, name: int, i: int, member: int) -> float:
+        return float(self.stats[name, i, member])
+
+    def _events(self, i: int, member: int) -> dict:
         samples = self.t.size
-        robots = {}
-        for i, robot in enumerate(self.scenario.robots):
-            robots[robot.name] = {**self.metrics.robot(i, samples), **robot.controller.describe(),
-                                  "start": list(robot.start), "substeps": int(self.substeps[i])}
-        sc = self.scenario
+        sat_v, sat_w = self._stat(k.SAT_V, i, member), self._stat(k.SAT_W, i, member)
+        return {"saturated_v_samples": int(sat_v), "saturated_omega_samples": int(sat_w),
+                "saturated_fraction": max(sat_v, sat_w) / samples, "saturated_samples": int(max(sat_v, sat_w)),
+                "singular_samples": int(self._stat(k.SINGULAR, i, member)),
+                "first_singular_time": _none_if_inf(self._stat(k.FIRST_SINGULAR, i, member))}
+
+    def _control(self, i: int, member: int) -> dict:
+        samples, s = self.t.size, lambda name: self._stat(name, i, member)
+        return {"peak_v": s(k.V_PEAK), "peak_v_time": s(k.V_PEAK_T), "peak_omega": s(k.W_PEAK),
+                "peak_omega_time": s(k.W_PEAK_T), "rms_v": math.sqrt(s(k.V_SQ) / samples),
+                "rms_omega": math.sqrt(s(k.W_SQ) / samples), "effort": float(self.t[-1]) * (s(k.V_SQ) + s(k.W_SQ)) / samples}
+
+    def tracking_metrics(self, robot, member: int = 0) -> dict:
+        """Position-error norm statistics of a tracking root (m), and its final heading error."""
+        i, samples, s = self.index(robot), self.t.size, lambda name: self._stat(name, self.index(robot), member)
+        var = s(k.E_M2) / samples
+        return {"mean": s(k.E_MEAN), "std": math.sqrt(var), "var": var, "rms": math.sqrt(s(k.E_SQ) / samples),
+                "max": s(k.E_MAX), "final": s(k.E_FINAL), "heading_final": s(k.H_FINAL)}
+
+    def heading_metrics(self, robot, member: int = 0) -> dict:
+        samples, s = self.t.size, lambda name: self._stat(name, self.index(robot), member)
+        return {"mean": s(k.H_SUM) / samples, "rms": math.sqrt(s(k.H_SQ) / samples), "max": s(k.H_MAX),
+                "final": s(k.H_FINAL)}
+
+    def posture_metrics(self, robot, member: int = 0) -> dict:
+        i = self.index(robot)
+        root = self.scenarios[member].robots[i]
+        out = {"goal": list(root.goal), "position_error": {"final": self._stat(k.E_FINAL, i, member),
+                                                           "max": self._stat(k.E_MAX, i, member)},
+               "heading_error": {"final": self._stat(k.H_FINAL, i, member)},
+               "heading_controlled": HEADING_CONTROLLED.get(root.controller.name, True)}
+        if not out["heading_controlled"]:
+            out["note"] = HEADING_NOTE
+        return out
+
+    def follower_metrics(self, robot, member: int = 0) -> dict:
+        """JSON-ready ``formation`` block of one follower."""
+        i = self.index(robot)
+        follower = self.scenarios[member].robots[i]
+        s = lambda name: self._stat(name, i, member)  # noqa: E731
+        samples = self.t.size
+        out = {"law": follower.law, "leaders": list(follower.leaders)}
+        first, second = follower.outputs
+        out[f"{first}_error"] = {"mean": s(k.E_MEAN), "max": s(k.E_MAX), "final": s(k.E_FINAL)}
+        out[f"{second}_error"] = {"mean": s(k.H_SUM) / samples, "max": s(k.H_MAX), "final": s(k.H_FINAL)}
+        out["settling"] = self._settling(follower, i, member) if self.record is not None else None
+        near = s(k.NEAR)
+        safety = {"min_distance": near if math.isfinite(near) else None,
+                  "min_distance_time": s(k.NEAR_T) if math.isfinite(near) else None,
+                  "time_below_2d": s(k.BELOW_2D) * self.scenarios[member].dt,
+                  "peak_v": s(k.V_PEAK), "peak_v_time": s(k.V_PEAK_T), "peak_omega": s(k.W_PEAK),
+                  "peak_omega_time": s(k.W_PEAK_T), "saturated_samples": self._events(i, member)["saturated_samples"]}
+        if follower.law != "separation-bearing":
+            safety.update(min_abs_sin_gamma_difference=s(k.MIN_SIN), min_abs_sin_gamma_time=s(k.MIN_SIN_T),
+                          singular_samples=int(s(k.SINGULAR)))
+        out["safety"] = safety
+        return out
+
+    def _settling(self, follower: Follower, i: int, member: int) -> list[dict]:
+        errors = self.output_errors(i, member)
+        entries = []
+        segments = target_segments(follower)
+        for change in follower.changes:
+            entry = {"at": change.at, "mode": change.mode}
+            following = [c.at for c in follower.changes if c.at > change.at]
+            until = following[0] if following else math.inf
+            for output, name in enumerate(follower.outputs):
+                segment = next((seg for seg in segments[output] if seg[0] == change.at), None)
+                if segment is None:
+                    entry[f"{name}_disturbance"] = float(np.abs(errors[output][self.t > change.at]).max())
+                else:
+                    band = m.SETTLING_BAND * abs(segment[2] - segment[1])
+                    entry[f"{name}_settling_time"] = m.settling_time(self.t, errors[output], change.at, band, until)
+                    entry[f"{name}_target"] = segment[2]
+            entries.append(entry)
+        return entries
+
+    def safety(self, member: int = 0) -> dict:
+        """The closest pair of axle centres within any connected formation, its time, and
+        the samples during which a pair was closer than 2d (d the largest castor offset)."""
+        scenario = self.scenarios[member]
+        pairs = self.pair_stats[:, :, member]
+        finite = np.isfinite(pairs[k.CLOSEST])
+        if not finite.any():
+            return {"min_distance": None}
+        c = int(np.argmin(np.where(finite, pairs[k.CLOSEST], np.inf)))
+        d = max([f.d for f in scenario.followers] or [0.0])
+        return {"min_distance": float(pairs[k.CLOSEST, c]),
+                "min_distance_pair": [self.names[int(pairs[k.CLOSEST_I, c])], self.names[int(pairs[k.CLOSEST_J, c])]],
+                "min_distance_time": float(pairs[k.CLOSEST_T, c]), "two_d": 2 * d,
+                "time_below_2d": float(np.nanmax(pairs[k.BELOW_ANY])) * scenario.dt}
+
+    def robot_summary(self, i: int, member: int = 0) -> dict:
+        robot = self.scenarios[member].robots[i]
+        start = [float(v) for v in (self.record[:3, 0, i, member] if self.record is not None else
+                                    self.scenarios[member].initial_poses()[i])]
+        out = {"role": "leader" if isinstance(robot, Robot) else "follower", "start": start,
+               "substeps": int(self.substeps[i]), "control": self._control(i, member), "events": self._events(i, member)}
+        if isinstance(robot, Robot):
+            out.update(robot.controller.describe())
+            if robot.posture:
+                out["posture"] = self.posture_metrics(i, member)
+            else:
+                tracking = self.tracking_metrics(i, member)
+                out["error"] = tracking
+                out["heading_error"] = self.heading_metrics(i, member)
+        else:
+            out.update({"formation_law": robot.law, "gains": {"k1": robot.k1, "k2": robot.k2}, "d": robot.d,
+                        "targets": dict(zip(robot.outputs, robot.targets))})
+            out["formation"] = self.follower_metrics(i, member)
+        return out
+
+    def to_dict(self, member: int = 0) -> dict:
+        """JSON-ready summary of one scenario of the batch."""
+        scenario = self.scenarios[member]
         return {
-            "scenario": sc.name,
-            "simulation": {"duration": float(self.t[-1]), "dt": sc.dt, "steps": sc.n_steps, "method": sc.method,
-                           "control_period": sc.control_period, "elapsed_s": self.elapsed_s},
-            "reference": sc.reference.describe(),
-            "robots": robots,
+            "scenario": scenario.name,
+            "simulation": {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
+                           "method": scenario.method, "control_period": scenario.control_period,
+                           "max_substeps": int(self.substeps.max()), "elapsed_s": self.elapsed_s,
+                           "batch": len(self.scenarios)},
+            "reference": scenario.reference.describe() if scenario.reference is not None else None,
+            "piconet": scenario.piconet,
+            "order": [self.names[i] for i in scenario.order()],
+            "robots": {robot.name: self.robot_summary(i, member) for i, robot in enumerate(scenario.robots)},
+            "safety": self.safety(member),
         }
 
-    def plot(self, robots=None, path=None, max_robots: int = 8):
-        """Desired vs actual path, error norm, v and ω over time (one figure).
+    # ------------------------------------------------------------------ exports
+    def table(self, member: int = 0, every: int = 1):
+        """Tidy per-sample rows (one per robot and sample): ``(header, rows)`` with the
+        columns ``t, robot, role, x, y, theta, xi, v, omega, error_1, error_2`` (units in
+        ``TABLE_COLUMNS``); ``every`` keeps one sample in that many."""
+        record = self._recorded()[:, ::every, :, member]
+        times = self.t[::every]
+        header = ["t", "robot", "role"] + [c[0] for c in TABLE_COLUMNS]
+        rows = []
+        for i, robot in enumerate(self.scenarios[member].robots):
+            role = "follower" if isinstance(robot, Follower) else ("posture" if robot.posture else "tracking")
+            values = record[[c[2] for c in TABLE_COLUMNS], :, i].T
+            rows += [[t, robot.name, role, *row] for t, row in zip(times.tolist(), values.tolist())]
+        return header, rows
 
-        ``robots``: names or indices to show (default: the first ``max_robots``).
-        ``path``: save to this file (PNG, PDF, SVG…) and close the figure.
-        """
+    def write_csv(self, path, member: int = 0, every: int = 1, digits: int = 9):
+        """The tidy table as CSV (``pandas.read_csv(path)`` gives one row per robot and
+        sample); the header names each column with its unit, e.g. ``x_m``."""
+        header, rows = self.table(member, every)
+        units = {"t": "s", **{c[0]: c[1] for c in TABLE_COLUMNS}}
+        header = [f"{h}_{units[h]}" if units.get(h) else h for h in header]
+        with open(path, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(header)
+            for row in rows:
+                writer.writerow([f"{v:.{digits}g}" if isinstance(v, float) else v for v in row])
+        return path
+
+    # ------------------------------------------------------------------ display
+    def __repr__(self) -> str:
+        s = self.scenario
+        kinds = f"{len(s.roots)} root(s), {len(s.followers)} follower(s)"
+        batch = f", batch of {len(self.scenarios)}" if len(self.scenarios) > 1 else ""
+        return (f"<SimulationResult {s.name!r}: {kinds}{batch}, {self.t[-1]:.6g} s in {s.n_steps} steps of "
+                f"{s.dt:g} s, {'recorded' if self.record is not None else 'statistics only'}>")
+
+    def _repr_html_(self) -> str:
+        from nonholo.sim.plotting import result_html
+
+        return result_html(self)
+
+    def plot(self, path=None, robots=None, member: int = 0, max_robots: int = 8, snapshots: int = 6):
+        """One figure: paths (with formation snapshots when there are followers), errors,
+        v and ω over time. ``robots``: names or indices to show (default: the first
+        ``max_robots``); ``path``: save to this file (PNG, PDF, SVG…) and close it."""
         from nonholo.sim.plotting import plot_result
 
-        return plot_result(self, robots, path, max_robots)
+        return plot_result(self, path, robots, member, max_robots, snapshots)
+
+    def write_gif(self, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0,
+                  progress: bool = False):
+        """Animated GIF of the run (matplotlib PillowWriter)."""
+        from nonholo.sim.plotting import animate
+
+        return animate(self, path, member, frames, fps, trail, progress)

@@ -1,8 +1,21 @@
-"""The simulator: wires a reference, unicycle plants and tracking laws, then runs the
-compiled RK4 kernel (or scipy ``solve_ivp`` for cross-checks).
+"""The one simulator: packs a scenario (or a batch of scenarios of one structure) into the
+arrays of ``nonholo.sim.kernel`` and integrates them with the compiled RK4, or with scipy
+``solve_ivp`` for cross-checks.
 
-Robots that share a law are integrated together as one batch; the reference is
-evaluated once per distinct time grid (rows at every RK4 stage time).
+**Groups.** A scenario's robots split into connected formations (a lone robot is one). The
+formations that share a structure (graph, laws, targets) and a sub-step plan are integrated
+together as one batch, copies along the kernel's batch axis: 10 000 lone robots under one
+law are one group of 10 000 copies of a one-robot graph. So a robot's result never depends
+on the other formations it is simulated with.
+
+**The sub-step rule.** RK4 sub-steps per output step are given (``substeps``) or planned so
+that h·λ ≤ ``STABLE_STEP_FACTOR`` for every rate λ known in advance — each root law's
+declared stiffness at the reference's peak speed and turn rate, the reference's own turn
+rate, the followers' gains — with the first ``STARTUP_TIME_CONSTANTS``/λ seconds of a stiff
+law refined ``STARTUP_REFINEMENT``-fold (its start-up transient), and so that h·ω ≤
+``MEASURED_STEP_FACTOR`` for the rates measured while running where they cannot be known in
+advance: a formation's turn rates (|ω|, and |ξ̇/ξ| of speed compensators), from a pilot run
+re-planned until a run's own rates are within its plan.
 """
 from __future__ import annotations
 
@@ -10,68 +23,46 @@ import math
 import sys
 import time
 from collections import defaultdict
+from collections.abc import Sequence
 from functools import cache
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo.control.registry import CONTROLLERS, ControllerConfig, TrackingController
+from nonholo.control.registry import initial_state
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError, SimulationError
+from nonholo.models.formation_geometry import separation_bearing, wrap
 from nonholo.references.feedforward import REF_OMEGA, REF_V
-from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats
+from nonholo.sim import kernel as kn
 from nonholo.sim.result import SimulationResult
-from nonholo.sim.scenario import Scenario
+from nonholo.sim.scenario import SEPARATION_BEARING, Follower, Robot, Scenario
+from nonholo.sim.targets import target_table
 
-# RK4 sub-step size relative to the fastest closed-loop rate λ: h·λ ≤ 0.5.
 STABLE_STEP_FACTOR = 0.5
-# Stiff laws (more than one sub-step) also refine their first 50/λ seconds tenfold, to
-# resolve the initial transient (the cascaded law turns at ~300 rad/s for ~20 ms).
+MEASURED_STEP_FACTOR = 0.05
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
 MAX_SUBSTEPS = 1000
+PLAN_ITERATIONS = 6
 # RK4 is stable for a linear mode of rate λ while h·λ < 2.785 (real axis).
 RK4_STABILITY_LIMIT = 2.78
 # The reference is surveyed at this many points to size the sub-steps.
 SURVEY_POINTS = 2001
 # Above this many robot-sub-steps a run is split into chunks with a progress bar.
 PROGRESS_WORK = 2e8
+# Refuse runs whose arrays would exceed this many bytes (estimated before allocating).
+MAX_BYTES = 8 * 2**30
+SOLVE_IVP_TOLERANCE = 1e-10
+# Laws faster than this (1/s) are stiff against the references' time scales: use Radau.
+STIFF_RATE = 50.0
 
 
 @cache
-def integrator(law, recording: bool):
-    return make_integrator(law, recording)
-
-
-def _substep_plan(scenario: Scenario, stiffness: float) -> tuple[int, int, int]:
-    """(sub-steps per output step, refined sub-steps, output steps refined at the start):
-    uniform if the scenario gives them, else from the law's stiffness (the fastest
-    closed-loop rate, 1/s)."""
-    if scenario.method != "rk4":
-        return 1, 1, 0
-    if scenario.substeps is not None:
-        step = scenario.dt / scenario.substeps
-        if stiffness * step > RK4_STABILITY_LIMIT:
-            raise NonholoInputError(
-                f"substeps = {scenario.substeps} is unstable for this law: its fastest rate {stiffness:.3g} 1/s times "
-                f"the step {step:.3g} s exceeds RK4's stability limit {RK4_STABILITY_LIMIT}; use more substeps or "
-                "leave them automatic")
-        return scenario.substeps, scenario.substeps, 0
-    needed = stiffness * scenario.dt / STABLE_STEP_FACTOR
-    if not needed <= MAX_SUBSTEPS:  # also catches inf and nan
-        raise NonholoInputError(
-            f"the control law is too stiff for dt = {scenario.dt:g} s (fastest rate {stiffness:.3g} 1/s would need "
-            f"{needed:.3g} sub-steps per step, at most {MAX_SUBSTEPS}): reduce dt or lower the gains")
-    base = max(1, math.ceil(needed))
-    if base == 1:
-        return 1, 1, 0
-    return base, base * STARTUP_REFINEMENT, math.ceil(STARTUP_TIME_CONSTANTS / stiffness / scenario.dt)
-
-
-def _plan_array(plan: tuple[int, int, int], n_steps: int) -> np.ndarray:
-    base, refined, refined_steps = plan
-    substeps = np.full(n_steps, base, dtype=np.int64)
-    substeps[:refined_steps] = refined
-    return substeps
+def kernel_for(laws: tuple, followers: bool):
+    """The compiled functions of a group whose roots run ``laws``: one or two (law function,
+    field namedtuple class) pairs."""
+    (law_a, fields_a), (law_b, fields_b) = laws if len(laws) == 2 else (laws[0], (kn.idle_law, kn.IdleFields))
+    return kn.make_kernel(law_a, fields_a, law_b, fields_b, followers)
 
 
 def stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,6 +80,147 @@ def stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return times, row_start
 
 
+def prior_plan(scenario: Scenario, rate: float, startup_rate: float) -> np.ndarray:
+    """Sub-steps per output step from the rates known in advance (see the module docstring)."""
+    n_steps, dt = scenario.n_steps, scenario.dt
+    if scenario.method != "rk4":
+        return np.ones(n_steps, dtype=np.int64)
+    if scenario.substeps is not None:
+        step = dt / scenario.substeps
+        if rate * step > RK4_STABILITY_LIMIT:
+            raise NonholoInputError(
+                f"substeps = {scenario.substeps} is unstable for this law: its fastest rate {rate:.3g} 1/s times "
+                f"the step {step:.3g} s exceeds RK4's stability limit {RK4_STABILITY_LIMIT}; use more substeps or "
+                "leave them automatic")
+        return np.full(n_steps, scenario.substeps, dtype=np.int64)
+    needed = rate * dt / STABLE_STEP_FACTOR
+    if not needed <= MAX_SUBSTEPS:  # also catches inf and nan
+        raise NonholoInputError(
+            f"the control law is too stiff for dt = {dt:g} s (fastest rate {rate:.3g} 1/s would need "
+            f"{needed:.3g} sub-steps per step, at most {MAX_SUBSTEPS}): reduce dt or lower the gains")
+    base = max(1, math.ceil(needed))
+    plan = np.full(n_steps, base, dtype=np.int64)
+    if base > 1:
+        plan[:math.ceil(STARTUP_TIME_CONSTANTS / startup_rate / dt)] = base * STARTUP_REFINEMENT
+    return plan
+
+
+def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float) -> np.ndarray:
+    """Sub-steps so that h·rate ≤ MEASURED_STEP_FACTOR for the rates met in each output step,
+    each step also covering its neighbours' (a transient may start just after a sample)."""
+    rate = np.where(np.isfinite(step_rate), step_rate, np.inf)
+    widened = rate[:-1].copy()
+    widened[1:] = np.maximum(widened[1:], rate[:-2])
+    widened = np.maximum(widened, rate[1:])
+    needed = np.ceil(widened * dt / MEASURED_STEP_FACTOR)
+    needed = np.clip(np.where(np.isfinite(needed), needed, MAX_SUBSTEPS), 1, MAX_SUBSTEPS).astype(np.int64)
+    return np.maximum(needed, prior)
+
+
+class Group:
+    """The kernel's arrays for the copies of one formation structure: ``copies`` is a list of
+    (member, robot indices parents-first) pairs, one per copy."""
+
+    def __init__(self, scenarios: list[Scenario], copies: list[tuple[int, tuple[int, ...]]], laws: tuple,
+                 prior: np.ndarray, v_d0: float, poses: list):
+        self.scenarios, self.copies, self.prior = scenarios, copies, prior
+        first_member, first = copies[0]
+        scenario = scenarios[first_member]
+        robots = [scenario.robots[i] for i in first]
+        local = {robot.name: j for j, robot in enumerate(robots)}
+        n_robots, n_batch = len(robots), len(copies)
+        self.followers = any(isinstance(r, Follower) for r in robots)
+        self.laws = laws
+        law_functions = [law for law, _ in laws]
+        self.kinds = np.array([kn.ROOT_A + law_functions.index(r.controller.law) if isinstance(r, Robot) else
+                               (kn.SEPARATION_BEARING if r.law == SEPARATION_BEARING else kn.SEPARATION_SEPARATION)
+                               for r in robots], dtype=np.int64)
+        self.order = np.arange(n_robots, dtype=np.int64)   # copies list robots parents-first
+        self.parents = np.full((2, n_robots), -1, dtype=np.int64)
+        for j, robot in enumerate(robots):
+            for slot, parent in enumerate(robot.parents):
+                self.parents[slot, j] = local[parent]
+        self.feeds = np.zeros(n_robots, dtype=np.int64)
+        self.feeds[self.parents[self.parents >= 0]] = 1
+        self.fields = np.zeros((kn.MAX_FIELDS, n_robots, n_batch))
+        self.limits = np.empty((2, n_robots, n_batch))
+        self.state = np.zeros((4, n_robots, n_batch))
+        self.offsets = np.zeros((2, n_robots, n_batch))
+        self.d_max = np.zeros(n_batch)
+        self.xi_speed = 0.0
+        for b, (member, indices) in enumerate(copies):
+            for j, i in enumerate(indices):
+                robot = scenarios[member].robots[i]
+                self.state[:3, j, b] = poses[member][i]
+                self.limits[:, j, b] = robot.v_max, robot.omega_max
+                if isinstance(robot, Robot):
+                    config = robot.controller
+                    vector = config.gain_vector()
+                    if robot.posture:
+                        vector = np.concatenate([robot.goal, vector])
+                    self.fields[:vector.size, j, b] = vector
+                    self.state[3, j, b] = initial_state(config, v_d0, robot.name)
+                    self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
+                else:
+                    self.fields[kn.K1, j, b], self.fields[kn.K2, j, b] = robot.k1, robot.k2
+                    self.fields[kn.OFFSET_D, j, b] = robot.d
+                    self.offsets[:, j, b] = np.subtract(robot.targets, robots[j].targets)
+                    self.d_max[b] = max(self.d_max[b], robot.d)
+        self.robots = robots
+
+    def targets(self, times: np.ndarray) -> np.ndarray:
+        table = np.zeros((times.size, 4, len(self.robots)))
+        for j, robot in enumerate(self.robots):
+            if isinstance(robot, Follower):
+                table[:, :, j] = target_table(robot, times)
+        return table
+
+    def initial_branches(self) -> np.ndarray:
+        """Each l–φ bearing at t = 0 on the 2π branch nearest its target φ_d(0)."""
+        branch = np.zeros(self.state.shape[1:])
+        first_targets = self.targets(np.zeros(1))[0]
+        for j in np.flatnonzero(self.kinds == kn.SEPARATION_BEARING):
+            p = self.parents[0, j]
+            _, raw, _ = separation_bearing(self.state[:3, p], self.state[:3, j], self.fields[kn.OFFSET_D, j])
+            target = first_targets[1, j] + self.offsets[1, j]
+            branch[j] = target + wrap(raw - target)
+        return branch
+
+
+def _structure(robot, scenario: Scenario, index: dict) -> tuple:
+    """What copies integrated together must share, for one robot (parents as positions)."""
+    if isinstance(robot, Robot):
+        return ("root", robot.controller.law, robot.posture)
+    return (robot.law, tuple(index[p] for p in robot.leaders), repr(robot.changes), robot.targets if robot.changes else None)
+
+
+def _check_batch(scenarios: list[Scenario]) -> None:
+    first = scenarios[0]
+    key = lambda s: (s.names, tuple(type(r).__name__ for r in s.robots),  # noqa: E731
+                     tuple(r.parents for r in s.robots),
+                     tuple(_structure(r, s, {n: i for i, n in enumerate(s.names)}) for r in s.robots),
+                     repr(s.reference.describe()) if s.reference is not None else None, s.duration, s.dt, s.method,
+                     s.control_period, s.substeps)
+    for other in scenarios[1:]:
+        if key(other) != key(first):
+            raise NonholoInputError(f"scenario {other.name!r} differs in structure from {first.name!r}: a batch "
+                                    "shares robots, links, laws, changes, reference and time grid")
+
+
+def _reference_survey(scenario: Scenario):
+    """Peak |v_d|, |ω_d| of the reference, and its rows checked finite (None without one)."""
+    if scenario.reference is None:
+        return 0.0, 0.0
+    survey = scenario.reference.table(np.linspace(0.0, scenario.duration, SURVEY_POINTS))
+    _check_finite(scenario, survey)
+    for spec in {r.controller.name: r.controller.controller for r in scenario.roots if not r.posture}.values():
+        if spec.needs_moving_reference:
+            speed = np.abs(survey[:, REF_V])
+            if speed.min() < 1e-3 * max(1.0, speed.max()):
+                scenario.reference.check_speed(0.0, scenario.duration, who=f"the {spec.name} controller")
+    return float(np.abs(survey[:, REF_V]).max()), float(np.abs(survey[:, REF_OMEGA]).max())
+
+
 def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
@@ -97,151 +229,210 @@ def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
             "(position or its first two derivatives): use a formula defined and smooth over the whole run")
 
 
-def _check_reference(scenario: Scenario, controller: TrackingController, rows: np.ndarray) -> None:
-    if not controller.needs_moving_reference:
-        return
-    speed = np.abs(rows[:, REF_V])
-    if speed.min() < 1e-3 * max(1.0, speed.max()):
-        scenario.reference.check_speed(0.0, rows[-1, 0], who=f"the {controller.name} controller")
+def _prior_rates(robots, v_peak: float, omega_peak: float) -> tuple[float, float]:
+    """(fastest rate known in advance, the fastest stiff root rate for the start-up)."""
+    rate, startup = 0.0, math.inf
+    for robot in robots:
+        if isinstance(robot, Robot):
+            spec = robot.controller.controller
+            stiffness = robot.controller.stiffness(v_peak, omega_peak)
+            rate = max(rate, stiffness, omega_peak if spec.needs_moving_reference else 0.0)
+            startup = min(startup, stiffness) if stiffness > 0 else startup
+        else:
+            rate = max(rate, robot.k1, robot.k2)
+    return rate, (startup if math.isfinite(startup) else max(rate, 1e-300))
 
 
-def compensator_start(name: str, config: ControllerConfig, v_d0: float) -> float:
-    """ξ(0) of a tracking law: the given ``xi0``, else the reference speed v_d(0) (spec
-    §3.6); 0 for laws without a compensator."""
-    if not config.controller.initial_compensator:
-        return 0.0
-    if config.xi0 is not None:
-        return config.xi0
-    if abs(v_d0) < 1e-9:
-        raise InfeasibleReferenceError(
-            f"robot {name!r}: xi0 defaults to v_d(0) = {v_d0:.3g}, the singular point of dynamic feedback; "
-            "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
-    return v_d0
-
-
-def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.ndarray:
-    v_d0 = float(config_rows[0, REF_V])
-    return np.array([[*r.start, compensator_start(r.name, r.controller, v_d0)] for r in robots], dtype=float).T.copy()
-
-
-def _group_robots(scenario: Scenario, v_peak: float, omega_peak: float) -> dict:
-    """Robots integrated together: same law and same sub-step plan, so that a robot's
-    result does not depend on the batch it is simulated in."""
-    groups = defaultdict(list)
-    for index, robot in enumerate(scenario.robots):
-        config = robot.controller
-        # Laws that use ω_d must also resolve the reference's own turning.
-        stiffness = max(config.stiffness(v_peak, omega_peak),
-                        omega_peak if config.controller.needs_moving_reference else 0.0)
-        groups[config.law, _substep_plan(scenario, stiffness)].append(index)
+def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: float) -> list[Group]:
+    first = scenarios[0]
+    index = {n: i for i, n in enumerate(first.names)}
+    poses = [s.initial_poses() for s in scenarios]
+    by_key = defaultdict(list)
+    for component in first.components():
+        robots = [first.robots[i] for i in component]
+        laws = tuple(dict.fromkeys((r.controller.law, r.controller.controller.gain_tuple)
+                                   for r in robots if isinstance(r, Robot)))
+        if len(laws) > 2:
+            raise NonholoInputError(f"robots {', '.join(r.name for r in robots if isinstance(r, Robot))} form one "
+                                    "connected formation with more than two different root controllers (at most two)")
+        rate, startup = _prior_rates(robots, v_peak, omega_peak)
+        prior = prior_plan(first, rate, startup)
+        local = {first.names[i]: j for j, i in enumerate(component)}
+        shape = tuple(_structure(r, first, local) for r in robots)
+        by_key[laws, shape, prior.tobytes()].append((component, prior))
+    groups = []
+    for (laws, _, _), entries in by_key.items():
+        copies = [(member, component) for member in range(len(scenarios)) for component, _ in entries]
+        groups.append(Group(scenarios, copies, laws, entries[0][1], v_d0, poses))
     return groups
 
 
-def simulate(scenario: Scenario, record: bool = True, progress: bool | None = None) -> SimulationResult:
-    """Simulate every robot of ``scenario``; ``record`` keeps trajectories (else only the
-    statistics, for large batches). ``progress``: show a progress bar (default: on a
-    terminal, for long runs)."""
+def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
+             progress: bool | None = None) -> SimulationResult:
+    """Simulate every robot of ``scenario`` — or of a list of scenarios of one structure (a
+    batch that differs in gains, offsets, targets, goals and starts). ``record`` keeps
+    trajectories (else only the statistics, for large batches). ``progress``: show a
+    progress bar (default: on a terminal, for long runs)."""
     started = time.perf_counter()
-    n_steps, n_robots = scenario.n_steps, len(scenario.robots)
-    grid = np.arange(n_steps + 1) * scenario.dt
-    survey = scenario.reference.table(np.linspace(0.0, grid[-1], SURVEY_POINTS))
-    v_peak = float(np.abs(survey[:, REF_V]).max())
-    omega_peak = float(np.abs(survey[:, REF_OMEGA]).max())
-    grid_rows = None
-    stats = np.empty((STAT_COUNT, n_robots))
-    record_array = np.empty((6, n_steps + 1 if record else 0, n_robots))
+    scenarios = list(scenario) if isinstance(scenario, (list, tuple)) else [scenario]
+    if not scenarios or not all(isinstance(s, Scenario) for s in scenarios):
+        raise NonholoInputError("simulate() takes a nonholo.Scenario or a list of them")
+    _check_batch(scenarios)
+    first = scenarios[0]
+    n_steps, n_robots, n_members = first.n_steps, len(first.robots), len(scenarios)
+    _check_size(first, n_robots * n_members, record)
+    grid = np.arange(n_steps + 1) * first.dt
+    v_peak, omega_peak = _reference_survey(first)
+    v_d0 = float(first.reference.table(grid[:1])[0, REF_V]) if first.reference is not None else 0.0
+    stats = np.empty((kn.STAT_COUNT, n_robots, n_members))
+    pair_stats = np.full((kn.PAIR_COUNT, len(first.components()), n_members), np.nan)
+    records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_members))
     substeps = np.empty(n_robots, dtype=np.int64)
-    _check_finite(scenario, survey)
-    rows_by_plan: dict[tuple, tuple] = {}
-    for controller_name in dict.fromkeys(r.controller.name for r in scenario.robots):
-        _check_reference(scenario, CONTROLLERS[controller_name], survey)
-    for (law, plan_key), members in _group_robots(scenario, v_peak, omega_peak).items():
-        robots = [scenario.robots[i] for i in members]
-        plan = _plan_array(plan_key, n_steps)
-        if plan_key not in rows_by_plan:
-            times, row_start = stage_times(scenario.dt, plan)
-            rows_by_plan[plan_key] = (scenario.reference.table(times), row_start)
-            _check_finite(scenario, rows_by_plan[plan_key][0])
-        rows, row_start = rows_by_plan[plan_key]
-        if grid_rows is None:  # every plan has a row at each t_k
-            stride = row_start[1] - row_start[0]
-            uniform = row_start[-1] == stride * n_steps
-            grid_rows = rows[::stride] if uniform else rows[row_start]
-        gains = np.zeros((MAX_GAINS, len(robots)))
-        for i, robot in enumerate(robots):
-            vector = robot.controller.gain_vector()
-            gains[:vector.size, i] = vector
-        limits = np.array([[r.v_max, r.omega_max] for r in robots]).T.copy()
-        state = _initial_states(scenario, robots, rows)
-        group_stats = new_stats(len(robots))
-        group_record = np.empty((6, record_array.shape[1], len(robots)))
-        law_rates, integrate, score = integrator(law, record)
-        if scenario.method == "rk4":
-            _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, group_stats, group_record,
-                     progress)
+    component_of = {c[0]: k for k, c in enumerate(first.components())}
+    reference_cache: dict[bytes, tuple] = {}
+    for group in _groups(scenarios, v_peak, omega_peak, v_d0):
+        integrate, evaluate, score = kernel_for(group.laws, group.followers)
+        if first.method == "rk4":
+            g_stats, g_pairs, g_record, plan = _run_rk4(integrate, first, group, record, progress, reference_cache)
         else:
-            _run_solve_ivp(law_rates, score, scenario, robots, state, gains, limits, grid_rows, group_stats,
-                           group_record)
-        _check_diverged(robots, group_stats)
-        stats[:, members] = group_stats
-        record_array[:, :, members] = group_record
-        substeps[members] = plan.max()
-    return SimulationResult(scenario=scenario, t=grid, reference_rows=grid_rows, stats=stats,
-                            record=record_array if record else None, substeps=substeps,
+            g_stats, g_pairs, g_record, plan = _run_solve_ivp(evaluate, score, first, group, record, grid)
+        for b, (member, indices) in enumerate(group.copies):
+            indices = list(indices)
+            stats[:, indices, member] = g_stats[:, :, b]
+            pair_stats[:, component_of[indices[0]], member] = g_pairs[:, b]
+            if record:
+                records[:, :, indices, member] = g_record[:, :, :, b]
+            substeps[indices] = plan.max()
+        _check_diverged(group, g_stats)
+    rows = first.reference.table(grid) if first.reference is not None else None
+    return SimulationResult(scenarios=tuple(scenarios), t=grid, reference_rows=rows, stats=stats,
+                            pair_stats=pair_stats, record=records if record else None, substeps=substeps,
                             elapsed_s=time.perf_counter() - started)
 
 
-def _run_rk4(integrate, scenario, state, gains, limits, rows, row_start, plan, stats, record, progress):
-    """Integrate all robots of a group; in time chunks with a progress bar on long runs."""
-    n_steps, n_robots = scenario.n_steps, state.shape[1]
-    held = np.zeros((6, n_robots))
+def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
+    """Refuse, before allocating, a run whose arrays would not fit (an estimate)."""
+    samples = scenario.n_steps + 1
+    estimate = 8.0 * robots * ((kn.REC_COUNT * samples if record else 0) + kn.STAT_COUNT + 64)
+    if scenario.reference is not None:
+        substeps = scenario.substeps or 1
+        estimate += 8.0 * 10 * 2 * substeps * samples
+    if estimate > MAX_BYTES:
+        raise NonholoInputError(
+            f"this run would need about {estimate / 2**30:.3g} GiB ({robots} robots x {samples} samples"
+            f"{', recorded' if record else ''}; at most {MAX_BYTES / 2**30:g} GiB): use a larger dt, a shorter "
+            "duration, fewer robots or record=False")
+
+
+def _reference_rows(scenario: Scenario, times: np.ndarray) -> np.ndarray:
+    if scenario.reference is None:
+        rows = np.zeros((times.size, 10))
+        rows[:, 0] = times
+        return rows
+    rows = scenario.reference.table(times)
+    _check_finite(scenario, rows)
+    return rows
+
+
+def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
+    """Integrate a group; groups with followers re-plan from the measured rates."""
+    n_steps, dt = scenario.n_steps, scenario.dt
+    plan = group.prior
+    iterations = PLAN_ITERATIONS if group.followers and scenario.substeps is None else 1
+    n_robots, n_batch = group.state.shape[1:]
+    for iteration in range(iterations):
+        key = plan.tobytes()
+        if key not in cache_:
+            times, row_start = stage_times(dt, plan)
+            cache_[key] = (_reference_rows(scenario, times), row_start, times)
+        rows, row_start, times = cache_[key]
+        targets = group.targets(times) if group.followers else np.zeros((1, 4, n_robots))
+        state, branch = group.state.copy(), group.initial_branches()
+        stats, pair_stats = kn.new_stats(n_robots, n_batch)
+        records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
+        held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
+        step_rate = np.zeros(n_steps + 1)
+        args = (state, group.fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
+                group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max, group.xi_speed, dt,
+                scenario.hold_every)
+        _integrate_chunks(integrate, args, n_steps, float(plan.sum()) * n_robots * n_batch, scenario.name,
+                          n_robots * n_batch, progress, (stats, pair_stats, records, held, step_rate))
+        if iterations == 1:
+            break
+        needed = measured_plan(step_rate, group.prior, dt)
+        if np.all(needed <= plan):
+            break
+        plan = needed if iteration < iterations - 2 else np.maximum(plan, needed)
+    return stats, pair_stats, records, plan
+
+
+def _integrate_chunks(integrate, args, n_steps, work, name, count, progress, outputs):
     if progress is None:
-        progress = float(plan.sum()) * n_robots > PROGRESS_WORK and sys.stderr.isatty()
+        progress = work > PROGRESS_WORK and sys.stderr.isatty()
     if not progress:
-        integrate(state, gains, limits, rows, row_start, plan, scenario.dt, scenario.hold_every, 0, n_steps, n_steps,
-                  stats, record, held)
+        integrate(*args, 0, n_steps, n_steps, *outputs)
         return
     from tqdm import tqdm
 
     chunks = np.linspace(0, n_steps, 51).astype(np.int64)
-    with tqdm(total=n_steps, unit="step", desc=f"{scenario.name}: {n_robots} robots", file=sys.stderr) as bar:
+    with tqdm(total=n_steps, unit="step", desc=f"{name}: {count} robots", file=sys.stderr) as bar:
         for k_start, k_stop in zip(chunks[:-1], chunks[1:]):
-            integrate(state, gains, limits, rows, row_start, plan, scenario.dt, scenario.hold_every, int(k_start),
-                      int(k_stop), n_steps, stats, record, held)
+            integrate(*args, int(k_start), int(k_stop), n_steps, *outputs)
             bar.update(int(k_stop - k_start))
 
 
-SOLVE_IVP_TOLERANCE = 1e-10
-# Laws faster than this (1/s) are stiff against the references' time scales: use Radau.
-STIFF_RATE = 50.0
-
-
-def _check_diverged(robots, stats: np.ndarray) -> None:
-    diverged = [r.name for r, ok in zip(robots, np.isfinite(stats[:STAT_COUNT - 1]).all(axis=0)) if not ok]
-    if diverged:
-        shown = ", ".join(repr(name) for name in diverged[:5]) + (" …" if len(diverged) > 5 else "")
+def _check_diverged(group: Group, stats: np.ndarray) -> None:
+    finite = np.isfinite(stats[[kn.E_MEAN, kn.E_M2, kn.V_SQ, kn.W_SQ]]).all(axis=(0, 2))
+    if not finite.all():
+        names = [robot.name for robot, ok in zip(group.robots, finite) if not ok]
+        shown = ", ".join(repr(name) for name in names[:5]) + (" …" if len(names) > 5 else "")
         raise SimulationError(
             f"the simulation of robot(s) {shown} diverged (non-finite state): reduce dt, set more substeps or "
-            "check the gains and actuator limits")
+            "check the gains, actuator limits and the formation's geometry")
 
 
-def _run_solve_ivp(law_rates, score, scenario, robots, state, gains, limits, grid_rows, stats, record):
+def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bool, grid: np.ndarray):
     """scipy cross-check: DOP853 (Radau for stiff laws), rtol = atol = 1e-10, dense output
-    sampled on the same grid and scored by the same compiled code."""
-    n = state.shape[1]
-    rates = np.empty((4, n))
-    reference = scenario.reference
+    sampled on the grid and scored by the same compiled code as the RK4 path."""
+    shape = group.state.shape
+    n_robots, n_batch = shape[1:]
+    instant = np.zeros((kn.INSTANT_COUNT, n_robots, n_batch))
+    live_branch = group.initial_branches()
+    bearing_robots = np.flatnonzero(group.kinds == kn.SEPARATION_BEARING)
+    slope = np.empty(shape)
 
     def rhs(t, y):
-        law_rates(y.reshape(4, n), reference.table(np.array([t])), gains, limits, rates)
-        return rates.ravel().copy()
+        state = y.reshape(shape)
+        for j in bearing_robots:
+            p = group.parents[0, j]
+            _, raw, _ = separation_bearing(state[:3, p], state[:3, j], group.fields[kn.OFFSET_D, j])
+            live_branch[j] += wrap(raw - live_branch[j])
+        times = np.array([t])
+        evaluate(state, group.fields, group.limits, tuple(_reference_rows(scenario, times)[0]), group.targets(times), 0,
+                 group.offsets, group.kinds, group.order, group.parents, live_branch, scenario.sin_floor, instant)
+        v, omega = instant[kn.I_V], instant[kn.I_OMEGA]
+        slope[0], slope[1], slope[2] = v * np.cos(state[2]), v * np.sin(state[2]), omega
+        slope[3] = instant[kn.I_XI_DOT]
+        return slope.ravel().copy()
 
-    v_peak, omega_peak = np.abs(grid_rows[:, REF_V]).max(), np.abs(grid_rows[:, REF_OMEGA]).max()
-    stiffness = max(r.controller.stiffness(v_peak, omega_peak) for r in robots)
+    v_peak = omega_peak = 0.0
+    if scenario.reference is not None:
+        rows = scenario.reference.table(grid)
+        v_peak, omega_peak = np.abs(rows[:, REF_V]).max(), np.abs(rows[:, REF_OMEGA]).max()
+    stiffness = max([r.controller.stiffness(v_peak, omega_peak) for r in group.robots if isinstance(r, Robot)]
+                    + [max(r.k1, r.k2) for r in group.robots if isinstance(r, Follower)])
     method = "Radau" if stiffness > STIFF_RATE else "DOP853"
-    solution = solve_ivp(rhs, (0.0, grid_rows[-1, 0]), state.ravel(), method=method, t_eval=grid_rows[:, 0],
-                         rtol=SOLVE_IVP_TOLERANCE, atol=SOLVE_IVP_TOLERANCE)
+    try:
+        solution = solve_ivp(rhs, (0.0, grid[-1]), group.state.ravel(), method=method, t_eval=grid,
+                             rtol=SOLVE_IVP_TOLERANCE, atol=SOLVE_IVP_TOLERANCE)
+    except (ValueError, OverflowError, FloatingPointError) as exc:
+        raise SimulationError(f"solve_ivp failed: {exc}"[:300]) from None
     if not solution.success:
-        raise RuntimeError(f"solve_ivp failed: {solution.message}")
-    states = np.ascontiguousarray(solution.y.T.reshape(-1, 4, n))
-    score(states, np.ascontiguousarray(grid_rows), gains, limits, stats, record)
+        raise SimulationError(f"solve_ivp failed: {solution.message}")
+    states = np.ascontiguousarray(solution.y.T.reshape(-1, *shape))
+    stats, pair_stats = kn.new_stats(n_robots, n_batch)
+    records = np.empty((kn.REC_COUNT, grid.size if record else 0, n_robots, n_batch))
+    score(states, group.fields, group.limits, _reference_rows(scenario, grid), group.targets(grid), group.offsets,
+          group.kinds, group.order, group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, stats,
+          pair_stats, records)
+    return stats, pair_stats, records, np.ones(scenario.n_steps, dtype=np.int64)

@@ -33,7 +33,7 @@ import numpy as np
 from nonholo import examples
 from nonholo.formation import (Follower, Formation, FormationResult, link_state, separation_bearing,
                                simulate_formation)
-from nonholo.formation.schedule import target_segments
+from nonholo.sim.targets import target_segments
 from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions, StudyResult
 from nonholo.studies.leader import Finding, _fmt, _text_table

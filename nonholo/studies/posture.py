@@ -24,7 +24,7 @@ from numba import njit
 from nonholo import examples
 from nonholo.control.posture import POSTURE_CONTROLLERS, goal_frame_pose, polar_command
 from nonholo.formation import Formation, FormationResult, simulate_formation
-from nonholo.formation.geometry import wrap
+from nonholo.models.formation_geometry import wrap
 from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions
 from nonholo.studies.formation import (COMPARISON_COLUMNS, QUICK_DT, Column, Comparison, SpecValue,

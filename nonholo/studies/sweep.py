@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from nonholo.errors import NonholoInputError
-from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim.scenario import Follower, Robot, Scenario
 from nonholo.sim.simulator import simulate
 
 METRICS = ("mean", "rms", "max", "final")
@@ -194,7 +194,7 @@ def choose_robot(scenario: Scenario, gains: Sequence[str], name: str | None = No
             if robot.name == name:
                 return robot
         raise NonholoInputError(f"no robot named {name!r} (robots: {', '.join(r.name for r in scenario.robots)})")
-    candidates = [r for r in scenario.robots if all(g in r.controller.controller.accepted_gains for g in gains)]
+    candidates = [r for r in scenario.robots if all(g in sweepable(r) for g in gains)]
     if len(candidates) == 1 or len(scenario.robots) == 1:
         return (candidates or scenario.robots)[0]
     if not candidates:
@@ -203,12 +203,32 @@ def choose_robot(scenario: Scenario, gains: Sequence[str], name: str | None = No
                             f"({', '.join(r.name for r in candidates)})")
 
 
+def sweepable(robot) -> tuple[str, ...]:
+    """What a sweep can vary on a robot: a root's gains; a follower's gains k1, k2, its
+    castor offset d and its targets (l, phi or l1, l2)."""
+    if isinstance(robot, Follower):
+        return ("k1", "k2", "d", *robot.outputs)
+    return robot.controller.controller.accepted_gains
+
+
+def _with_values(robot: Follower, values: dict) -> Follower:
+    targets = list(robot.targets)
+    for j, name in enumerate(robot.outputs):
+        if name in values:
+            targets[j] = values.pop(name)
+    return dataclasses.replace(robot, targets=tuple(targets), **values)
+
+
 def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> list[Robot]:
     """One copy of ``base`` per grid point (row-major over ``axes``), with that point's
     gains and the same start, limits, variant and ξ(0)."""
     names = [a.name for a in axes]
     if len(set(names)) != len(names):
         raise NonholoInputError(f"a gain is swept twice: {', '.join(names)}")
+    grids = np.meshgrid(*(a.values for a in axes), indexing="ij")
+    if isinstance(base, Follower):
+        return [_with_values(base, {n: float(v) for n, v in zip(names, point)})
+                for point in zip(*(g.ravel() for g in grids))]
     config = base.controller
     fixed = dict(config.gains)
     if config.xi0 is not None:
@@ -217,7 +237,6 @@ def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> lis
         if alias in names:
             for target in targets:
                 fixed.pop(target, None)
-    grids = np.meshgrid(*(a.values for a in axes), indexing="ij")
     return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
                                 controller=config.controller.configure(
                                     {**fixed, **{n: float(v) for n, v in zip(names, point)}}, config.variant))
@@ -238,6 +257,8 @@ def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "me
     call, statistics only); ``steps`` overrides the scenario's number of output steps."""
     if metric not in METRICS:
         raise NonholoInputError(f"unknown metric {metric!r} (valid: {', '.join(METRICS)})")
+    if scenario.followers or any(r.posture for r in scenario.roots):
+        return [_run_graph_sweep(scenario, spec, metric, steps, progress) for spec in specs]
     bases, robots, spans = [], [], []
     for number, spec in enumerate(specs):
         if not 1 <= len(spec.axes) <= 2:
@@ -260,6 +281,29 @@ def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "me
         sweeps.append(SweepResult(scenario.name, base.name, base.controller.name, tuple(spec.axes), metric, errors,
                                   elapsed))
     return sweeps
+
+
+def _run_graph_sweep(scenario: Scenario, spec: SweepSpec, metric: str, steps: int | None,
+                     progress: bool | None) -> SweepResult:
+    """A sweep of a scenario with followers or posture roots: one copy of the whole scenario
+    per grid point, simulated as one batch; the metric is the varied robot's error (a
+    follower's first output, l or l1)."""
+    if not 1 <= len(spec.axes) <= 2:
+        raise NonholoInputError(f"sweep one or two gains, got {len(spec.axes)}")
+    base = choose_robot(scenario, [a.name for a in spec.axes], spec.robot)
+    if steps is not None:
+        scenario = dataclasses.replace(scenario, dt=None, steps=steps)
+    index = scenario.names.index(base.name)
+    members = [dataclasses.replace(scenario, robots=scenario.robots[:index] + (robot,) + scenario.robots[index + 1:],
+                                   steps=None, name=f"{scenario.name}-sweep")
+               for robot in sweep_robots(base, spec.axes)]
+    started = time.perf_counter()
+    result = simulate(members, record=False, progress=progress)
+    elapsed = time.perf_counter() - started
+    shape = tuple(a.values.size for a in spec.axes)
+    errors = {s: getattr(result.metrics, f"error_{s}")[index].reshape(shape).copy() for s in _STATISTICS}
+    law = base.law if isinstance(base, Follower) else base.controller.name
+    return SweepResult(scenario.name, base.name, law, tuple(spec.axes), metric, errors, elapsed)
 
 
 def run_sweep(scenario: Scenario, axes: Sequence[GainAxis], robot: str | None = None, metric: str = "mean",

@@ -20,11 +20,13 @@ import math
 
 import numpy as np
 
-from nonholo.formation.model import AMBIGUOUS_TURN, FormationError, Follower
+from nonholo.errors import FormationError
 
 TAU = 2.0 * math.pi
 TABLE_COLUMNS = ("output_1_d", "output_2_d", "output_1_d_rate", "output_2_d_rate")
 EVENT_TOLERANCE = 1e-9
+# |Δφ| this close to π is ambiguous under "shortest" (spec §2.5): the turn is decided by round-off.
+AMBIGUOUS_TURN = 1e-6
 
 
 def smoothstep(tau):
@@ -55,7 +57,7 @@ def resolve_bearing(previous: float, new: float, direction: str, follower: str =
     return previous + turn
 
 
-def target_segments(follower: Follower) -> list[list[tuple[float, float, float, float]]]:
+def target_segments(follower) -> list[list[tuple[float, float, float, float]]]:
     """Per output, the changes as (at, from, to, ramp duration) with bearings resolved."""
     current = list(follower.targets)
     segments: list[list[tuple[float, float, float, float]]] = [[], []]
@@ -72,7 +74,7 @@ def target_segments(follower: Follower) -> list[list[tuple[float, float, float, 
     return segments
 
 
-def target_table(follower: Follower, times: np.ndarray) -> np.ndarray:
+def target_table(follower, times: np.ndarray) -> np.ndarray:
     """(len(times), 4): output targets and their rates (``TABLE_COLUMNS``) at ``times``."""
     times = np.asarray(times, dtype=float)
     table = np.zeros((times.size, 4))

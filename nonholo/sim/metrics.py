@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nonholo.formation.geometry import wrap
+from nonholo.models.formation_geometry import wrap
 
 SETTLING_BAND = 0.02
 
