@@ -36,7 +36,7 @@ from nonholo.sim.kernel import row_values, stable_cache_identity
 from nonholo.sim.kernel import saturate as saturate_commands
 
 LEADER, SEPARATION_BEARING, SEPARATION_SEPARATION = 0, 1, 2
-LEADER_GAINS = 8
+LEADER_GAINS = 10  # MAX_LAW_FIELDS
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
  REC_SIN_GAMMA, REC_SINGULAR, REC_SATURATED) = range(15)
 RECORD_FIELDS = 15
@@ -48,7 +48,7 @@ _OPTIONS = dict(cache=True, error_model="numpy")
 @njit(inline="always", **_OPTIONS)
 def leader_gains_of(gains, r, b):
     return (gains[0, r, b], gains[1, r, b], gains[2, r, b], gains[3, r, b], gains[4, r, b], gains[5, r, b],
-            gains[6, r, b], gains[7, r, b])
+            gains[6, r, b], gains[7, r, b], gains[8, r, b], gains[9, r, b])
 
 
 @njit(inline="always", **_OPTIONS)

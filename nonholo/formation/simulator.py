@@ -19,7 +19,7 @@ from functools import cache
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo.control.posture import initial_compensator
+from nonholo.control.registry import initial_state
 from nonholo.errors import NonholoInputError, SimulationError
 from nonholo.formation import kernel as fk
 from nonholo.formation.geometry import separation_bearing, wrap
@@ -27,8 +27,8 @@ from nonholo.formation.model import SEPARATION_BEARING, Follower, Formation, Lea
 from nonholo.formation.result import FormationResult
 from nonholo.formation.schedule import target_table
 from nonholo.references.feedforward import REF_OMEGA, REF_V
-from nonholo.sim.simulator import (MAX_SUBSTEPS, SOLVE_IVP_TOLERANCE, SURVEY_POINTS, compensator_start,
-                                    stage_times)
+from nonholo.sim.kernel import packed_law
+from nonholo.sim.simulator import MAX_SUBSTEPS, SOLVE_IVP_TOLERANCE, SURVEY_POINTS, stage_times
 
 RATE_STEP = 0.05
 PLAN_ITERATIONS = 6
@@ -62,9 +62,9 @@ class Packed:
                 for j, parent in enumerate(robot.leaders):
                     self.parents[j, i] = names.index(parent)
         leader = first.leaders[0]
-        self.law = leader.controller.law
+        self.law = packed_law(leader.controller.law, leader.controller.controller.gain_tuple)
         self.posture = leader.posture
-        self.xi_speed = 1.0 if leader.controller.controller.initial_compensator else 0.0
+        self.xi_speed = 1.0 if leader.controller.controller.xi_is_speed else 0.0
         self.leader_gains = np.zeros((fk.LEADER_GAINS, n_robots, n_batch))
         self.params = np.zeros((3, n_robots, n_batch))
         self.limits = np.empty((2, n_robots, n_batch))
@@ -116,11 +116,7 @@ class Packed:
             for i, robot in enumerate(formation.robots):
                 if not isinstance(robot, Leader):
                     continue
-                config = robot.controller
-                if robot.posture:
-                    self.state[3, i, b] = initial_compensator(config)
-                else:
-                    self.state[3, i, b] = compensator_start(robot.name, config, float(first_row[REF_V]))
+                self.state[3, i, b] = initial_state(robot.controller, float(first_row[REF_V]), robot.name)
 
     def initial_branches(self, first_targets: np.ndarray) -> np.ndarray:
         """Each l–φ bearing at t = 0 on the 2π branch nearest its target φ_d(0)."""

@@ -24,6 +24,7 @@ mutates ``state``, ``stats``, ``record`` and ``held`` and can be resumed
 from __future__ import annotations
 
 import math
+from functools import cache
 
 import llvmlite.binding
 import numpy as np
@@ -46,7 +47,7 @@ llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
 STAT_COUNT = 17
 REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA = range(6)
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
-MAX_GAINS = 5
+MAX_GAINS = 10  # MAX_LAW_FIELDS
 
 # "contract" lets LLVM fuse a*b + c into one FMA instruction (deterministic, and more
 # accurate); no other fast-math relaxations, so NaN/inf semantics and ordering stay IEEE.
@@ -61,7 +62,23 @@ def new_stats(n: int) -> np.ndarray:
 
 @njit(inline="always", **_OPTIONS)
 def gains_of(gains, i):
-    return gains[0, i], gains[1, i], gains[2, i], gains[3, i], gains[4, i]
+    return (gains[0, i], gains[1, i], gains[2, i], gains[3, i], gains[4, i], gains[5, i], gains[6, i], gains[7, i],
+            gains[8, i], gains[9, i])
+
+
+@cache
+def packed_law(law, gain_tuple):
+    """``law`` taking its gains as MAX_GAINS plain slots (the rows of the gain array):
+    the first fields of its namedtuple ``gain_tuple``, the rest unused."""
+    n = len(gain_tuple._fields)
+
+    @njit(inline="always", error_model="numpy")
+    def packed(x, y, theta, cos_theta, sin_theta, xi, ref, slots):
+        return law(x, y, theta, cos_theta, sin_theta, xi, ref, gain_tuple(*slots[:n]))
+
+    function = law.py_func
+    packed._set_uuid(f"{function.__module__}.{function.__qualname__}.packed")
+    return packed
 
 
 @njit(inline="always", **_OPTIONS)

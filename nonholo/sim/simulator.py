@@ -15,10 +15,10 @@ from functools import cache
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo.control.registry import CONTROLLERS, ControllerConfig, TrackingController
+from nonholo.control.registry import CONTROLLERS, TrackingController, initial_state
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError, SimulationError
 from nonholo.references.feedforward import REF_OMEGA, REF_V
-from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats
+from nonholo.sim.kernel import MAX_GAINS, STAT_COUNT, make_integrator, new_stats, packed_law
 from nonholo.sim.result import SimulationResult
 from nonholo.sim.scenario import Scenario
 
@@ -105,23 +105,9 @@ def _check_reference(scenario: Scenario, controller: TrackingController, rows: n
         scenario.reference.check_speed(0.0, rows[-1, 0], who=f"the {controller.name} controller")
 
 
-def compensator_start(name: str, config: ControllerConfig, v_d0: float) -> float:
-    """ξ(0) of a tracking law: the given ``xi0``, else the reference speed v_d(0) (spec
-    §3.6); 0 for laws without a compensator."""
-    if not config.controller.initial_compensator:
-        return 0.0
-    if config.xi0 is not None:
-        return config.xi0
-    if abs(v_d0) < 1e-9:
-        raise InfeasibleReferenceError(
-            f"robot {name!r}: xi0 defaults to v_d(0) = {v_d0:.3g}, the singular point of dynamic feedback; "
-            "set gains.xi0 to a small non-zero speed of the sign of the intended motion")
-    return v_d0
-
-
 def _initial_states(scenario: Scenario, robots, config_rows: np.ndarray) -> np.ndarray:
     v_d0 = float(config_rows[0, REF_V])
-    return np.array([[*r.start, compensator_start(r.name, r.controller, v_d0)] for r in robots], dtype=float).T.copy()
+    return np.array([[*r.start, initial_state(r.controller, v_d0, r.name)] for r in robots], dtype=float).T.copy()
 
 
 def _group_robots(scenario: Scenario, v_peak: float, omega_peak: float) -> dict:
@@ -133,7 +119,7 @@ def _group_robots(scenario: Scenario, v_peak: float, omega_peak: float) -> dict:
         # Laws that use ω_d must also resolve the reference's own turning.
         stiffness = max(config.stiffness(v_peak, omega_peak),
                         omega_peak if config.controller.needs_moving_reference else 0.0)
-        groups[config.law, _substep_plan(scenario, stiffness)].append(index)
+        groups[packed_law(config.law, config.controller.gain_tuple), _substep_plan(scenario, stiffness)].append(index)
     return groups
 
 

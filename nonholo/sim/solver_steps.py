@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from nonholo.models.unicycle import unicycle_rates
-from nonholo.sim.kernel import MAX_GAINS, command_at, gains_of, new_stats, stable_cache_identity
+from nonholo.sim.kernel import MAX_GAINS, command_at, gains_of, new_stats, packed_law, stable_cache_identity
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import _initial_states, integrator
@@ -125,11 +125,12 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
         gains[:vector.size, 0] = vector
         limits = np.array([[robot.v_max], [robot.omega_max]])
         state0 = _initial_states(scenario, [robot], rows0)[:, 0].copy()
+        law = packed_law(robot.controller.law, robot.controller.controller.gain_tuple)
         if engine == "compiled":
-            t, y = _compiled_steps(robot.controller.law, table, state0, gains, limits, duration, settings)
+            t, y = _compiled_steps(law, table, state0, gains, limits, duration, settings)
         else:
-            t, y = _scipy_steps(robot.controller.law, scenario.reference, state0, gains, limits, duration, settings)
-        _, _, score = integrator(robot.controller.law, False)
+            t, y = _scipy_steps(law, scenario.reference, state0, gains, limits, duration, settings)
+        _, _, score = integrator(law, False)
         robot_stats = new_stats(1)
         score(np.ascontiguousarray(y.reshape(-1, 4, 1)), np.ascontiguousarray(scenario.reference.table(t)), gains,
               limits, robot_stats, np.empty((6, 0, 1)))
