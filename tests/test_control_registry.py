@@ -70,8 +70,9 @@ def test_a_law_registered_here_is_simulated_through_the_public_api(registered):
                                                               spec.gain_tuple.__qualname__) is spec.gain_tuple
     ref = references.circle()
     row = ref.table([0.0])[0]
-    robots = [nonholo.Robot("on", nonholo.controller("test-proportional", k=2.0, kl=1.0), start=(row[1], row[2], row[7])),
-              nonholo.Robot("off", nonholo.controller("test-proportional", k=2.0, kl=1.0), start=(9.0, 1.0, 2.0))]
+    config = nonholo.controller("test-proportional", k=2.0, kl=1.0)
+    robots = [nonholo.Robot("on", config, start=(row[1], row[2], row[7])),
+              nonholo.Robot("off", config, start=(9.0, 1.0, 2.0))]
     result = nonholo.simulate(nonholo.Scenario(ref, robots, duration=40.0, dt=0.01), record=False)
     assert result.metrics.error_max[0] < 1e-7
     assert result.metrics.error_max[1] > 0.5 and result.metrics.error_final[1] < 1e-2 * result.metrics.error_max[1]

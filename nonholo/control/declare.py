@@ -94,7 +94,8 @@ def check_gains(owner: str, values: Mapping, accepted: tuple[str, ...], defaults
         if alias in values:
             clash = [t for t in targets if t in values]
             if clash:
-                raise NonholoInputError(f"gain {alias!r} of {owner} conflicts with {', '.join(clash)}: give one or the other")
+                raise NonholoInputError(
+                    f"gain {alias!r} of {owner} conflicts with {', '.join(clash)}: give one or the other")
             resolved.update({t: float(values[alias]) for t in targets})
     resolved.update({k: float(v) for k, v in values.items() if k not in aliases})
     for name, rule in rules.items():
@@ -264,7 +265,8 @@ def _check_function(name, variant: str, function) -> None:
     plain = all(p.kind == p.POSITIONAL_OR_KEYWORD and p.default is p.empty for p in parameters)
     names = tuple(p.name for p in parameters)
     if names != LAW_PARAMETERS or not plain:
-        _fail(name, f"variant {variant!r} ({py_func.__qualname__}) has the signature ({', '.join(map(str, parameters))}), "
+        found = ", ".join(map(str, parameters))
+        _fail(name, f"variant {variant!r} ({py_func.__qualname__}) has the signature ({found}), "
                     f"expected ({', '.join(LAW_PARAMETERS)}) without defaults")
 
 
@@ -369,8 +371,8 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
                 _fail(name, f"alias {alias!r} refers to unknown gain(s) {', '.join(map(repr, unknown)) or '(none)'} "
                             f"(gains: {', '.join(gains)})")
         initial_rule = _normalise_initial(name, state, initial, gains)
-        initial_gain = initial_rule[len("gain:"):] if isinstance(initial_rule, str) and initial_rule.startswith("gain:") \
-            else None
+        by_gain = isinstance(initial_rule, str) and initial_rule.startswith("gain:")
+        initial_gain = initial_rule[len("gain:"):] if by_gain else None
         if initial_rule == REFERENCE_SPEED and STATE_GAIN in alias_map:
             _fail(name, f"alias {STATE_GAIN!r} collides with the initial-state gain")
         tuple_gains = tuple(g for g in gains if g != initial_gain)
@@ -392,7 +394,10 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
         moving = kind == "tracking" if needs_moving_reference is None else bool(needs_moving_reference)
         if kind == "posture" and moving:
             _fail(name, "a posture law does not read the reference: needs_moving_reference must be False")
-        speed = initial_rule == REFERENCE_SPEED or initial_gain is not None if xi_is_speed is None else bool(xi_is_speed)
+        if xi_is_speed is None:  # ξ(0) = v_d(0) or a kick speed: ξ is a speed
+            speed = initial_rule == REFERENCE_SPEED or initial_gain is not None
+        else:
+            speed = bool(xi_is_speed)
         if speed and state is None:
             _fail(name, "xi_is_speed=True without a state")
         spec = ControlLaw(
