@@ -76,7 +76,7 @@ def test_approximate_linearization_places_the_frozen_time_poles(v_d, omega_d):
     zeta, b = 0.5, 2.0
     law = CONTROLLERS["approximate-linearization"].laws["default"].py_func
     ref_row = np.array([0, 0, 0, v_d, 0, 0, 0, 0, v_d, omega_d], dtype=float)
-    gains = (zeta, b)
+    gains = CONTROLLERS["approximate-linearization"].gain_tuple(zeta=zeta, b=b)
 
     def error_rates(e):
         x, y, th = pose_from_errors(ref_row, *e)
@@ -101,7 +101,8 @@ def test_cascaded_error_dynamics_have_the_designed_structure(variant, v_d, omega
 
     def error_rates(e):
         x, y, th = pose_from_errors(ref_row, *e)
-        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, tuple(ref_row), (c1, c2, c3))
+        v, w, _, _ = law(x, y, th, math.cos(th), math.sin(th), 0.0, tuple(ref_row),
+                         CONTROLLERS["cascaded"].gain_tuple(c1=c1, c2=c2, c3=c3))
         return np.array([w * e[1] - v + v_d * math.cos(e[2]), -w * e[0] + v_d * math.sin(e[2]), omega_d - w])
 
     jac = np.column_stack([(error_rates(h) - error_rates(-h)) / 2e-7 for h in np.eye(3) * 1e-7])

@@ -27,16 +27,23 @@ Law signature: see ``nonholo.control.linearization``.
 """
 from __future__ import annotations
 
+import math
+
 from numba import njit
 
+from nonholo.control.declare import NONZERO, POSITIVE, Gain, control_law
 from nonholo.numerics import sincos
 from nonholo.references.feedforward import (REF_DDX, REF_DDY, REF_DX, REF_DY, REF_OMEGA, REF_THETA, REF_X,
                                             REF_Y)
 
 
+@control_law("offset-point", title="Static input-output linearization of an offset point",
+             source="thesis §4.8 Eq 4.34-4.38; spec §3.5; De Luca, Oriolo & Vendittelli 2001",
+             gains={"d": Gain(0.5, NONZERO), "k1": Gain(1.0, POSITIVE), "k2": Gain(1.0, POSITIVE)},
+             stiffness=lambda g, v_d, omega_d: max(g["k1"], g["k2"], (v_d + abs(g["d"]) * omega_d) / abs(g["d"])))
 @njit(inline="always", error_model="numpy")
 def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
-    d, k1, k2 = gains[0], gains[1], gains[2]
+    d, k1, k2 = gains.d, gains.k1, gains.k2
     sin_d, cos_d = sincos(ref[REF_THETA])
     turn = d * ref[REF_OMEGA]
     r1 = ref[REF_DX] - turn * sin_d + k1 * (ref[REF_X] + d * cos_d - (x + d * cos_theta))
@@ -44,9 +51,16 @@ def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     return cos_theta * r1 + sin_theta * r2, (cos_theta * r2 - sin_theta * r1) / d, 0.0, 0.0
 
 
+@control_law("dynamic-feedback", title="Full-state linearization by dynamic feedback",
+             source="thesis §4.9 Eq 4.39-4.50; spec §3.6; Oriolo, De Luca & Vendittelli 2002",
+             gains={"kp1": Gain(1.0, POSITIVE), "kp2": Gain(1.0, POSITIVE), "kd1": Gain(0.7, POSITIVE),
+                    "kd2": Gain(0.7, POSITIVE), "xi_min": Gain(1e-3, POSITIVE)},
+             aliases={"kp": ("kp1", "kp2"), "kd": ("kd1", "kd2")},
+             state="xi", initial="reference-speed", needs_moving_reference=False,
+             stiffness=lambda g, v_d, omega_d: max(g["kd1"], g["kd2"], math.sqrt(max(g["kp1"], g["kp2"]))))
 @njit(inline="always", error_model="numpy")
 def dynamic_feedback_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
-    kp1, kp2, kd1, kd2, xi_min = gains[0], gains[1], gains[2], gains[3], gains[4]
+    kp1, kp2, kd1, kd2, xi_min = gains.kp1, gains.kp2, gains.kd1, gains.kd2, gains.xi_min
     r1 = ref[REF_DDX] + kp1 * (ref[REF_X] - x) + kd1 * (ref[REF_DX] - xi * cos_theta)
     r2 = ref[REF_DDY] + kp2 * (ref[REF_Y] - y) + kd2 * (ref[REF_DY] - xi * sin_theta)
     singular = abs(xi) < xi_min

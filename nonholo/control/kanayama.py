@@ -10,16 +10,23 @@ frequency v_d √Ky and damping Kθ / (2√Ky). Law signature: see
 """
 from __future__ import annotations
 
+import math
+
 from numba import njit
 
+from nonholo.control.declare import POSITIVE, Gain, control_law
 from nonholo.control.tracking_errors import tracking_errors
 from nonholo.numerics import sincos
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 
+@control_law("kanayama", title="Stable tracking (linearized error model)",
+             source="thesis §4.5 Eq 4.26; spec §3.4; Kanayama, Kimura, Miyazaki & Noguchi 1990",
+             gains={"kx": Gain(10.0, POSITIVE), "ky": Gain(0.0064, POSITIVE), "ktheta": Gain(0.16, POSITIVE)},
+             stiffness=lambda g, v_d, omega_d: max(g["kx"], v_d * (math.sqrt(g["ky"]) + g["ktheta"])))
 @njit(inline="always", error_model="numpy")
 def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
-    kx, ky, ktheta = gains[0], gains[1], gains[2]
+    kx, ky, ktheta = gains.kx, gains.ky, gains.ktheta
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     sin_e3, cos_e3 = sincos(e3)

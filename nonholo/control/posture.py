@@ -29,8 +29,9 @@ handled by first expressing the robot in the goal frame (spec §5, not stated in
 
 Signature: the tracking-law signature ``law(x, y, θ, cos θ, sin θ, ξ, ref, gains)`` of
 ``nonholo.control.linearization`` with ``ref[0]`` the time and the goal in the gain
-tuple, ``gains = (x_g, y_g, θ_g, gain_1, …)``, so the formation kernel runs posture and
-tracking leaders alike.
+tuple: posture laws are declared with ``kind="posture"``, so their gain tuple has the
+fields ``goal_x, goal_y, goal_theta`` first, then the gains (``nonholo.control.declare``),
+and the kernel runs posture and tracking robots alike.
 """
 from __future__ import annotations
 
@@ -38,19 +39,23 @@ import math
 
 from numba import njit
 
-from nonholo.control.registry import POSITIVE, GainRule, TrackingController
+from collections.abc import Iterator, Mapping
+
+from nonholo.control.declare import GOAL_FIELDS, POSITIVE, POSTURE_CONTROLLERS, Gain, GainRule, control_law
 from nonholo.control.tracking_errors import tracking_errors
+from nonholo.errors import NonholoInputError
 from nonholo.numerics import sinc_of, sincos, wrap_angle
 
-GOAL_SLOTS = 3  # x_g, y_g, θ_g precede the gains in the gain tuple
+GOAL_SLOTS = len(GOAL_FIELDS)  # goal_x, goal_y, goal_theta precede the gains in the gain tuple
+NONZERO_KICK = GainRule(lambda g: g != 0, "!= 0 (a robot at rest is the singular point of dynamic feedback)")
 
 
 @njit(inline="always", error_model="numpy")
 def goal_frame_pose(x, y, theta, gains):
-    """Robot pose (x, y, θ̃) in the frame of the goal (gains[0:3] = x_g, y_g, θ_g)."""
-    sin_g, cos_g = sincos(gains[2])
-    dx, dy = x - gains[0], y - gains[1]
-    return cos_g * dx + sin_g * dy, -sin_g * dx + cos_g * dy, theta - gains[2]
+    """Robot pose (x, y, θ̃) in the frame of the goal (gains.goal_x, goal_y, goal_theta)."""
+    sin_g, cos_g = sincos(gains.goal_theta)
+    dx, dy = x - gains.goal_x, y - gains.goal_y
+    return cos_g * dx + sin_g * dy, -sin_g * dx + cos_g * dy, theta - gains.goal_theta
 
 
 @njit(inline="always", error_model="numpy")
@@ -59,10 +64,16 @@ def excitation(e2, t, k6):
     return math.tanh(0.5 * k6 * e2) * math.sin(t)
 
 
+@control_law("time-varying", kind="posture", title="Smooth time-varying posture feedback",
+             source="thesis Eq 4.51, 5.11-5.12; spec follower-posture.md §5.1 (errata 10, 25, 26); Samson 1993",
+             gains={"k1": Gain(0.5, POSITIVE), "k2": Gain(2.0, POSITIVE), "k3": Gain(1.0, POSITIVE),
+                    "k5": Gain(1.0, POSITIVE), "k6": Gain(50.0, POSITIVE)},
+             state="xi", initial=0.0, xi_is_speed=False,
+             stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"]))
 @njit(inline="always", error_model="numpy")
 def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.1. ξ is x_d, the moving point on the goal's x-axis (x_d(0) = 0)."""
-    k1, k2, k3, k5, k6 = gains[3], gains[4], gains[5], gains[6], gains[7]
+    k1, k2, k3, k5, k6 = gains.k1, gains.k2, gains.k3, gains.k5, gains.k6
     gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
     sin_t, cos_t = sincos(gtheta)
     # e2 does not depend on v_d: evaluate the errors once against x_d, then form v_d.
@@ -74,6 +85,11 @@ def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     return v, omega, v_d, 0.0
 
 
+@control_law("polar", kind="posture", title="Polar-coordinate posture law",
+             source="thesis Eq 4.52-4.54, 5.13; spec §5.2 (errata 11, 28); Aicardi et al. 1995",
+             gains={"k1": Gain(1.0, POSITIVE), "k2": Gain(3.0, POSITIVE), "k3": Gain(2.0, POSITIVE),
+                    "tolerance": Gain(1e-9, POSITIVE)},
+             stiffness=lambda g, v, w: max(g["k1"], g["k2"]))
 @njit(inline="always", error_model="numpy")
 def polar_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.2 (Aicardi et al.), angles wrapped to (−π, π]; stop below the tolerance."""
@@ -85,7 +101,7 @@ def polar_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 def polar_command(psi, gx, gy, gtheta, gains):
     """(v, ω, 0, 0) of the polar law at distance ψ from the goal and goal-frame pose
     (gx, gy, gθ): φ the direction to the goal, μ = φ − gθ."""
-    k1, k2, k3, tolerance = gains[3], gains[4], gains[5], gains[6]
+    k1, k2, k3, tolerance = gains.k1, gains.k2, gains.k3, gains.tolerance
     phi = math.atan2(-gy, -gx)
     mu = wrap_angle(phi - gtheta)
     sin_mu, cos_mu = sincos(mu)
@@ -95,10 +111,16 @@ def polar_command(psi, gx, gy, gtheta, gains):
     return (v if moving else 0.0), (omega if moving else 0.0), 0.0, 0.0
 
 
+@control_law("dynamic-feedback-posture", kind="posture", title="Dynamic feedback linearization posture regulator",
+             source="thesis Eq 4.55, 5.14; spec §5.3 (errata 13, 29); Oriolo, De Luca & Vendittelli 2002",
+             gains={"kp1": Gain(2.0, POSITIVE), "kd1": Gain(3.0, POSITIVE), "kp2": Gain(12.0, POSITIVE),
+                    "kd2": Gain(7.0, POSITIVE), "xi_min": Gain(1e-9, POSITIVE), "xi0": Gain(0.1, NONZERO_KICK)},
+             state="xi", initial="gain:xi0", heading_controlled=False,
+             stiffness=lambda g, v, w: max(g["kd1"], g["kd2"]))
 @njit(inline="always", error_model="numpy")
 def dynamic_feedback_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.3: PD on the goal-frame position through the compensator ξ = v."""
-    kp1, kd1, kp2, kd2, xi_min = gains[3], gains[4], gains[5], gains[6], gains[7]
+    kp1, kd1, kp2, kd2, xi_min = gains.kp1, gains.kd1, gains.kp2, gains.kd2, gains.xi_min
     gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
     sin_t, cos_t = sincos(gtheta)
     r1 = -kp1 * gx - kd1 * xi * cos_t
@@ -109,51 +131,25 @@ def dynamic_feedback_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gai
     return xi, omega, r1 * cos_t + r2 * sin_t, 1.0 if singular else 0.0
 
 
-NONZERO_KICK = GainRule(lambda g: g != 0, "!= 0 (a robot at rest is the singular point of dynamic feedback)")
+class _HeadingControlled(Mapping):
+    """Posture law name → whether it regulates the final heading (live view of the registry)."""
+
+    def __getitem__(self, name: str) -> bool:
+        return POSTURE_CONTROLLERS[name].heading_controlled
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(POSTURE_CONTROLLERS)
+
+    def __len__(self) -> int:
+        return len(POSTURE_CONTROLLERS)
 
 
-def _no_stiffness(gains, v_d, omega_d):
-    return 0.0
-
-
-POSTURE_CONTROLLERS: dict[str, TrackingController] = {c.name: c for c in (
-    TrackingController(
-        name="time-varying", title="Smooth time-varying posture feedback",
-        source="thesis Eq 4.51, 5.11-5.12; spec follower-posture.md §5.1 (errata 10, 25, 26); Samson 1993",
-        laws={"default": time_varying_posture_law}, gains=("k1", "k2", "k3", "k5", "k6"),
-        defaults={"k1": 0.5, "k2": 2.0, "k3": 1.0, "k5": 1.0, "k6": 50.0},
-        rules={g: POSITIVE for g in ("k1", "k2", "k3", "k5", "k6")},
-        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"]), kind="posture"),
-    TrackingController(
-        name="polar", title="Polar-coordinate posture law",
-        source="thesis Eq 4.52-4.54, 5.13; spec §5.2 (errata 11, 28); Aicardi et al. 1995",
-        laws={"default": polar_posture_law}, gains=("k1", "k2", "k3", "tolerance"),
-        defaults={"k1": 1.0, "k2": 3.0, "k3": 2.0, "tolerance": 1e-9},
-        rules={g: POSITIVE for g in ("k1", "k2", "k3", "tolerance")},
-        needs_moving_reference=False, stiffness=lambda g, v, w: max(g["k1"], g["k2"]), kind="posture"),
-    TrackingController(
-        name="dynamic-feedback-posture", title="Dynamic feedback linearization posture regulator",
-        source="thesis Eq 4.55, 5.14; spec §5.3 (errata 13, 29); Oriolo, De Luca & Vendittelli 2002",
-        laws={"default": dynamic_feedback_posture_law}, gains=("kp1", "kd1", "kp2", "kd2", "xi_min"),
-        defaults={"kp1": 2.0, "kd1": 3.0, "kp2": 12.0, "kd2": 7.0, "xi_min": 1e-9, "xi0": 0.1},
-        rules={g: POSITIVE for g in ("kp1", "kd1", "kp2", "kd2", "xi_min")} | {"xi0": NONZERO_KICK},
-        initial_compensator="xi0", needs_moving_reference=False,
-        stiffness=lambda g, v, w: max(g["kd1"], g["kd2"]), kind="posture"),
-)}
-
-HEADING_CONTROLLED = {"time-varying": True, "polar": True, "dynamic-feedback-posture": False}
+HEADING_CONTROLLED: Mapping[str, bool] = _HeadingControlled()
 
 
 def posture_controller(name: str, **gains: float):
     """A configured posture stabiliser, e.g. ``posture_controller("polar", k2=4)``."""
-    from nonholo.errors import NonholoInputError
-
     spec = POSTURE_CONTROLLERS.get(name)
     if spec is None:
         raise NonholoInputError(f"unknown posture controller {name!r} (valid: {', '.join(POSTURE_CONTROLLERS)})")
     return spec.configure(gains)
-
-
-def initial_compensator(config) -> float:
-    """ξ(0) of a posture law: x_d(0) = 0 (time-varying), the kick speed (dynamic), 0 (polar)."""
-    return float(config.xi0) if config.controller.initial_compensator else 0.0

@@ -66,7 +66,7 @@ def cold_first_call_s() -> float:
 def python_rk4(scenario: Scenario) -> float:
     """Plain-Python RK4 of the single scenario; returns the mean error (as a check)."""
     rows = scenario.reference.table(np.arange(2 * scenario.n_steps + 1) * (scenario.dt / 2))
-    gains = tuple(scenario.robots[0].controller.gain_vector())
+    gains = scenario.robots[0].controller.gain_values()
     law = dynamic_feedback_law.py_func
     x, y, theta = scenario.robots[0].start
     xi = rows[0, 8]
@@ -94,7 +94,7 @@ def python_rk4(scenario: Scenario) -> float:
 
 def scipy_solve_ivp(scenario: Scenario):
     reference = scenario.reference
-    gains = tuple(scenario.robots[0].controller.gain_vector())
+    gains = scenario.robots[0].controller.gain_values()
     law = dynamic_feedback_law.py_func
 
     def rhs(t, q):
