@@ -48,8 +48,9 @@ def test_run_writes_plot_and_output_folder(tmp_path, capsys):
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 20_000
     out = tmp_path / "out"
     assert json.loads((out / "result.json").read_text())["robots"]["leader"]["controller"] == "dynamic-feedback"
-    header = (out / "trajectories.csv").read_text().splitlines()[0]
-    assert header.startswith("t,leader.x,leader.y,leader.theta")
+    lines = (out / "trajectories.csv").read_text().splitlines()
+    assert lines[0].startswith("t_s,robot,role,x_m,y_m,theta_rad")   # tidy: one row per robot and sample, units
+    assert lines[1].startswith("0,leader,tracking,0,0.5,0,")
     assert "leader" in capsys.readouterr().out
 
 

@@ -258,9 +258,14 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     """
     stable_cache_identity(law_a)
     stable_cache_identity(law_b)
+    # Graphs with followers keep every operation as written (no FMA contraction): their cost
+    # is the graph, not the arithmetic, and nearly singular l–l passages are sensitive to it.
+    _OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract"} if not followers else False)
     n_a, n_b = len(gains_a._fields), len(gains_b._fields)
     posture_a = gains_a._fields[:3] == ("goal_x", "goal_y", "goal_theta")
     posture_b = gains_b._fields[:3] == ("goal_x", "goal_y", "goal_theta")
+    # Turn rates not known in advance (followers, posture laws' start-up) are measured.
+    measuring = followers or posture_a or posture_b
 
     @njit(inline="always", **_OPTIONS)
     def root_errors(posture, fields, r, b, x, y, theta, ref):
@@ -292,24 +297,24 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                         v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
                             law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
                         err1, err2 = root_errors(posture_b, fields, r, b, x, y, theta, ref)
-                elif followers and kind == SEPARATION_BEARING:
+                elif followers:
                     z1_d = targets[target_row, 0, r] + offsets[0, r, b]
                     z2_d = targets[target_row, 1, r] + offsets[1, r, b]
-                    v, omega, sat_v, sat_w, _, _, out1, out2, rate1, rate2 = bearing_command(
-                        x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
-                        instant[I_OMEGA, p1, b], branch[r, b], z1_d, z2_d, targets[target_row, 2, r],
-                        targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b], fields[OFFSET_D, r, b], v_max,
-                        omega_max)
+                    if kind == SEPARATION_BEARING:
+                        v, omega, sat_v, sat_w, _, _, out1, out2, rate1, rate2 = bearing_command(
+                            x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
+                            instant[I_OMEGA, p1, b], branch[r, b], z1_d, z2_d, targets[target_row, 2, r],
+                            targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b], fields[OFFSET_D, r, b],
+                            v_max, omega_max)
+                    else:
+                        v, omega, sat_v, sat_w, singular, _, _, out1, out2, rate1, rate2, sin_gamma = pair_command(
+                            x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
+                            state[0, p2, b], state[1, p2, b], state[2, p2, b], instant[I_V, p2, b], z1_d, z2_d,
+                            targets[target_row, 2, r], targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b],
+                            fields[OFFSET_D, r, b], sin_floor, v_max, omega_max)
                     err1, err2 = out1 - z1_d, out2 - z2_d
                 else:
-                    z1_d = targets[target_row, 0, r] + offsets[0, r, b]
-                    z2_d = targets[target_row, 1, r] + offsets[1, r, b]
-                    v, omega, sat_v, sat_w, singular, _, _, out1, out2, rate1, rate2, sin_gamma = pair_command(
-                        x, y, theta, state[0, p1, b], state[1, p1, b], state[2, p1, b], instant[I_V, p1, b],
-                        state[0, p2, b], state[1, p2, b], state[2, p2, b], instant[I_V, p2, b], z1_d, z2_d,
-                        targets[target_row, 2, r], targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b],
-                        fields[OFFSET_D, r, b], sin_floor, v_max, omega_max)
-                    err1, err2 = out1 - z1_d, out2 - z2_d
+                    v = omega = sat_v = sat_w = err1 = err2 = 0.0
                 instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_XI_DOT, r, b] = v, omega, xi_dot
                 instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b] = singular, sat_v, sat_w
                 instant[I_OUT1, r, b], instant[I_OUT2, r, b] = out1, out2
@@ -445,7 +450,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = unicycle_step(
                         state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b], held[HELD_V, r, b], omega,
                         held[HELD_XI_DOT, r, b], h)
-                    if followers:
+                    if measuring:
                         peak = max(peak, abs(omega))
             elif kind == ROOT_A or kind == ROOT_B:
                 feeding = followers and feeds[r] != 0
@@ -463,13 +468,13 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     state[1, r, b] = rk4_sum(y, sixth, b1, b2, b3, b4)
                     state[2, r, b] = rk4_sum(theta, sixth, c1, c2, c3, c4)
                     state[3, r, b] = rk4_sum(xi, sixth, d1, d2, d3, d4)
-                    if followers:
+                    if measuring:
                         peak = max(peak, abs(w1), abs(w2), abs(w3), abs(w4),
                                    xi_speed * max(abs(d1) / max(abs(xi), 1e-300), abs(d2) / max(abs(xi2), 1e-300),
                                                   abs(d3) / max(abs(xi3), 1e-300), abs(d4) / max(abs(xi4), 1e-300)))
-                        if feeding:
-                            store_stages(stage_pose, stage_command, r, b, (x, y, theta, v1, w1), (x2, y2, t2, v2, w2),
-                                         (x3, y3, t3, v3, w3), (x4, y4, t4, v4, w4))
+                    if feeding:
+                        store_stages(stage_pose, stage_command, r, b, (x, y, theta, v1, w1), (x2, y2, t2, v2, w2),
+                                     (x3, y3, t3, v3, w3), (x4, y4, t4, v4, w4))
             elif followers:
                 # Followers are few and their laws long: their four stages run as a loop (not
                 # unrolled), which keeps the compiled code small.
@@ -481,7 +486,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     k1, k2, d = fields[K1, r, b], fields[K2, r, b], fields[OFFSET_D, r, b]
                     o1, o2, bearing = offsets[0, r, b], offsets[1, r, b], branch[r, b]
                     dx = dy = dtheta = 0.0
-                    sum_x = sum_y = sum_theta = 0.0
+                    first_x = first_y = first_theta = mid_x = mid_y = mid_theta = 0.0
                     for s in range(4):
                         weight = 0.0 if s == 0 else (half if s < 3 else h)
                         sx, sy, st = x + weight * dx, y + weight * dy, theta + weight * dtheta
@@ -491,17 +496,19 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                             kind, sx, sy, st, parent_stage(stage_pose, stage_command, s, p1, b),
                             parent_stage(stage_pose, stage_command, s, p2, b), bearing, target, k1, k2, d, sin_floor,
                             v_max, omega_max)
-                        coefficient = 1.0 if s == 0 or s == 3 else 2.0
-                        sum_x += coefficient * dx
-                        sum_y += coefficient * dy
-                        sum_theta += coefficient * dtheta
+                        if s == 0:
+                            first_x, first_y, first_theta = dx, dy, dtheta
+                        elif s == 1:
+                            mid_x, mid_y, mid_theta = dx, dy, dtheta
+                        elif s == 2:
+                            mid_x, mid_y, mid_theta = mid_x + dx, mid_y + dy, mid_theta + dtheta
                         peak = max(peak, abs(omega))
                         if feeding:
                             stage_pose[s, 0, r, b], stage_pose[s, 1, r, b], stage_pose[s, 2, r, b] = sx, sy, st
                             stage_command[s, 0, r, b], stage_command[s, 1, r, b] = v, omega
-                    state[0, r, b] = x + sixth * sum_x
-                    state[1, r, b] = y + sixth * sum_y
-                    state[2, r, b] = theta + sixth * sum_theta
+                    state[0, r, b] = x + sixth * (first_x + 2.0 * mid_x + dx)
+                    state[1, r, b] = y + sixth * (first_y + 2.0 * mid_y + dy)
+                    state[2, r, b] = theta + sixth * (first_theta + 2.0 * mid_theta + dtheta)
         if followers:
             update_branches(state, fields, kinds, parents, branch)
         return peak
@@ -550,9 +557,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             for j in range(m):
                 rate = substep(state, fields, limits, rows, row + 2 * j, dt / m, targets, offsets, kinds, order, parents,
                                feeds, branch, sin_floor, xi_speed, sampled_data, held, stage_pose, stage_command)
-                if followers:
+                if measuring:
                     step_rate[k] = max(step_rate[k], rate)
-            if followers:
+            if measuring:
                 for r in range(n_robots):
                     for b in range(n_batch):
                         step_rate[k] = max(step_rate[k], abs(instant[I_OMEGA, r, b]))

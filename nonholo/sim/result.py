@@ -187,11 +187,11 @@ class SimulationResult:
                 "rms_omega": math.sqrt(s(k.W_SQ) / samples), "effort": float(self.t[-1]) * (s(k.V_SQ) + s(k.W_SQ)) / samples}
 
     def tracking_metrics(self, robot, member: int = 0) -> dict:
-        """Position-error norm statistics of a tracking root (m), and its final heading error."""
+        """Position-error norm statistics of a tracking root (m)."""
         i, samples, s = self.index(robot), self.t.size, lambda name: self._stat(name, self.index(robot), member)
         var = s(k.E_M2) / samples
         return {"mean": s(k.E_MEAN), "std": math.sqrt(var), "var": var, "rms": math.sqrt(s(k.E_SQ) / samples),
-                "max": s(k.E_MAX), "final": s(k.E_FINAL), "heading_final": s(k.H_FINAL)}
+                "max": s(k.E_MAX), "final": s(k.E_FINAL)}
 
     def heading_metrics(self, robot, member: int = 0) -> dict:
         samples, s = self.t.size, lambda name: self._stat(name, self.index(robot), member)

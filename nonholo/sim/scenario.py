@@ -400,7 +400,7 @@ def _check_follower(robot: Follower, names: list[str], scenario: Scenario) -> No
     if not (is_real(robot.d) and robot.d > 0):
         raise FormationError(robot.name, "d", f"the castor offset must be > 0 (G is singular at d = 0), got {robot.d!r}")
     try:
-        follower_gains({"k1": robot.k1, "k2": robot.k2})
+        follower_gains({"k1": robot.k1, "k2": robot.k2}, robot.law)
     except NonholoInputError as exc:
         raise FormationError(robot.name, "gains", str(exc)) from None
     if not all(is_real(v) for v in robot.targets):

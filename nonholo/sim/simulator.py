@@ -14,8 +14,8 @@ declared stiffness at the reference's peak speed and turn rate, the reference's 
 rate, the followers' gains — with the first ``STARTUP_TIME_CONSTANTS``/λ seconds of a stiff
 law refined ``STARTUP_REFINEMENT``-fold (its start-up transient), and so that h·ω ≤
 ``MEASURED_STEP_FACTOR`` for the rates measured while running where they cannot be known in
-advance: a formation's turn rates (|ω|, and |ξ̇/ξ| of speed compensators), from a pilot run
-re-planned until a run's own rates are within its plan.
+advance — a formation's and a posture law's turn rates (|ω|, and |ξ̇/ξ| of speed
+compensators) — from a pilot run re-planned until a run's own rates are within its plan.
 """
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def stage_times(dt: float, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return times, row_start
 
 
-def prior_plan(scenario: Scenario, rate: float, startup_rate: float) -> np.ndarray:
+def prior_plan(scenario: Scenario, rate: float) -> np.ndarray:
     """Sub-steps per output step from the rates known in advance (see the module docstring)."""
     n_steps, dt = scenario.n_steps, scenario.dt
     if scenario.method != "rk4":
@@ -101,7 +101,7 @@ def prior_plan(scenario: Scenario, rate: float, startup_rate: float) -> np.ndarr
     base = max(1, math.ceil(needed))
     plan = np.full(n_steps, base, dtype=np.int64)
     if base > 1:
-        plan[:math.ceil(STARTUP_TIME_CONSTANTS / startup_rate / dt)] = base * STARTUP_REFINEMENT
+        plan[:math.ceil(STARTUP_TIME_CONSTANTS / rate / dt)] = base * STARTUP_REFINEMENT
     return plan
 
 
@@ -130,6 +130,8 @@ class Group:
         local = {robot.name: j for j, robot in enumerate(robots)}
         n_robots, n_batch = len(robots), len(copies)
         self.followers = any(isinstance(r, Follower) for r in robots)
+        # Plans from measured rates where they are not known in advance (see the docstring).
+        self.measured = self.followers or any(isinstance(r, Robot) and r.posture for r in robots)
         self.laws = laws
         law_functions = [law for law, _ in laws]
         self.kinds = np.array([kn.ROOT_A + law_functions.index(r.controller.law) if isinstance(r, Robot) else
@@ -229,18 +231,18 @@ def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
             "(position or its first two derivatives): use a formula defined and smooth over the whole run")
 
 
-def _prior_rates(robots, v_peak: float, omega_peak: float) -> tuple[float, float]:
-    """(fastest rate known in advance, the fastest stiff root rate for the start-up)."""
-    rate, startup = 0.0, math.inf
+def _prior_rate(robots, v_peak: float, omega_peak: float) -> float:
+    """The fastest rate known in advance: root laws' stiffness (and the reference's turn
+    rate, for laws that track it), followers' gains."""
+    rate = 0.0
     for robot in robots:
         if isinstance(robot, Robot):
             spec = robot.controller.controller
-            stiffness = robot.controller.stiffness(v_peak, omega_peak)
-            rate = max(rate, stiffness, omega_peak if spec.needs_moving_reference else 0.0)
-            startup = min(startup, stiffness) if stiffness > 0 else startup
+            rate = max(rate, robot.controller.stiffness(v_peak, omega_peak),
+                       omega_peak if spec.needs_moving_reference else 0.0)
         else:
             rate = max(rate, robot.k1, robot.k2)
-    return rate, (startup if math.isfinite(startup) else max(rate, 1e-300))
+    return rate
 
 
 def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: float) -> list[Group]:
@@ -255,8 +257,7 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         if len(laws) > 2:
             raise NonholoInputError(f"robots {', '.join(r.name for r in robots if isinstance(r, Robot))} form one "
                                     "connected formation with more than two different root controllers (at most two)")
-        rate, startup = _prior_rates(robots, v_peak, omega_peak)
-        prior = prior_plan(first, rate, startup)
+        prior = prior_plan(first, _prior_rate(robots, v_peak, omega_peak))
         local = {first.names[i]: j for j, i in enumerate(component)}
         shape = tuple(_structure(r, first, local) for r in robots)
         by_key[laws, shape, prior.tobytes()].append((component, prior))
@@ -338,7 +339,7 @@ def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress
     """Integrate a group; groups with followers re-plan from the measured rates."""
     n_steps, dt = scenario.n_steps, scenario.dt
     plan = group.prior
-    iterations = PLAN_ITERATIONS if group.followers and scenario.substeps is None else 1
+    iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
     for iteration in range(iterations):
         key = plan.tobytes()
