@@ -79,6 +79,21 @@ class Metrics:
             singular=stats[k.SINGULAR].astype(np.int64), first_singular=stats[k.FIRST_SINGULAR],
         )
 
+    def robot(self, i: int, samples: int) -> dict:
+        """JSON-ready metrics of robot ``i`` (arrays over robots)."""
+        return {
+            "error": {s: float(getattr(self, f"error_{s}")[i]) for s in ("mean", "std", "var", "rms", "max", "final")},
+            "heading_error": {s: float(getattr(self, f"heading_{s}")[i]) for s in ("mean", "rms", "max", "final")},
+            "control": {"peak_v": float(self.peak_v[i]), "peak_omega": float(self.peak_omega[i]),
+                        "rms_v": float(self.rms_v[i]), "rms_omega": float(self.rms_omega[i]),
+                        "effort": float(self.effort[i])},
+            "events": {"saturated_v_samples": int(self.saturated_v[i]),
+                       "saturated_omega_samples": int(self.saturated_omega[i]),
+                       "saturated_fraction": float(max(self.saturated_v[i], self.saturated_omega[i]) / samples),
+                       "singular_samples": int(self.singular[i]),
+                       "first_singular_time": _none_if_inf(self.first_singular[i])},
+        }
+
 
 @dataclass(frozen=True)
 class SimulationResult:

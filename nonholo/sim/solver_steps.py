@@ -34,11 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from nonholo.control.registry import initial_state
 from nonholo.models.unicycle import unicycle_rates
-from nonholo.sim.kernel import MAX_GAINS, command_at, gains_of, new_stats, stable_cache_identity
+from nonholo.references.feedforward import REF_V
+from nonholo.sim import kernel as kn
+from nonholo.sim.kernel import field_row, root_command, stable_cache_identity
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
-from nonholo.sim.simulator import _initial_states, integrator
+from nonholo.sim.simulator import kernel_for
 
 ENGINES = ("compiled", "scipy")
 _OPTIONS = dict(cache=True, error_model="numpy")
@@ -115,42 +118,59 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
         raise ValueError(f"unknown engine {engine!r} (valid: {', '.join(ENGINES)})")
     started = time.perf_counter()
     duration = scenario.duration
-    rows0 = scenario.reference.table(np.array([0.0]))
+    v_d0 = float(scenario.reference.table(np.array([0.0]))[0, REF_V])
     table = _HermiteTable.of(scenario.reference, duration) if engine == "compiled" else None
-    stats = new_stats(len(scenario.robots))
+    stats = np.empty((kn.STAT_COUNT, len(scenario.robots)))
     times = []
     for i, robot in enumerate(scenario.robots):
-        gains = np.zeros((MAX_GAINS, 1))
-        vector = robot.controller.gain_vector()
-        gains[:vector.size, 0] = vector
-        limits = np.array([[robot.v_max], [robot.omega_max]])
-        state0 = _initial_states(scenario, [robot], rows0)[:, 0].copy()
+        law, fields_class = robot.controller.law, robot.controller.controller.gain_tuple
+        one = _OneRobot(robot, initial_state(robot.controller, v_d0, robot.name))
         if engine == "compiled":
-            t, y = _compiled_steps(robot.controller.law, table, state0, gains, limits, duration, settings)
+            t, y = _compiled_steps(law, fields_class, table, one, duration, settings)
         else:
-            t, y = _scipy_steps(robot.controller.law, scenario.reference, state0, gains, limits, duration, settings)
-        _, _, score = integrator(robot.controller.law, False)
-        robot_stats = new_stats(1)
-        score(np.ascontiguousarray(y.reshape(-1, 4, 1)), np.ascontiguousarray(scenario.reference.table(t)), gains,
-              limits, robot_stats, np.empty((6, 0, 1)))
-        stats[:, i] = robot_stats[:, 0]
+            t, y = _scipy_steps(law, fields_class, scenario.reference, one, duration, settings)
+        integrate, evaluate, score = kernel_for(((law, fields_class),), False)
+        robot_stats, pair_stats = kn.new_stats(1, 1)
+        score(np.ascontiguousarray(y.reshape(-1, 4, 1, 1)), one.fields, one.limits,
+              np.ascontiguousarray(scenario.reference.table(t)), *one.graph(), robot_stats, pair_stats,
+              np.empty((kn.REC_COUNT, 0, 1, 1)))
+        stats[:, i] = robot_stats[:, 0, 0]
         times.append(t)
     samples = np.array([t.size for t in times], dtype=float)
     return SolverStepResult(scenario, Metrics.from_stats(stats, samples, duration), tuple(times), settings, engine,
                             time.perf_counter() - started)
 
 
-def _scipy_steps(law, reference, state0, gains, limits, duration, settings):
+class _OneRobot:
+    """The kernel's arrays for one lone tracking robot (a graph of one root)."""
+
+    def __init__(self, robot, xi0: float):
+        self.fields = np.zeros((kn.MAX_FIELDS, 1, 1))
+        vector = robot.controller.gain_vector()
+        self.fields[:vector.size, 0, 0] = vector
+        self.limits = np.array([robot.v_max, robot.omega_max], dtype=float).reshape(2, 1, 1)
+        self.state0 = np.array([*robot.start, xi0], dtype=float)
+
+    def graph(self) -> tuple:
+        """(targets, offsets, kinds, order, parents, branch, sin_floor, d_max) of a lone root."""
+        return (np.zeros((1, 4, 1)), np.zeros((2, 1, 1)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                np.full((2, 1), -1, dtype=np.int64), np.zeros((1, 1)), 1e-6, np.zeros(1))
+
+
+def _scipy_steps(law, fields_class, reference, one: _OneRobot, duration, settings):
     from scipy.integrate import solve_ivp
 
-    law_rates, _, _ = integrator(law, False)
-    rates = np.empty((4, 1))
+    _, evaluate, _ = kernel_for(((law, fields_class),), False)
+    targets, offsets, kinds, order, parents, branch, sin_floor, _ = one.graph()
+    instant = np.zeros((kn.INSTANT_COUNT, 1, 1))
 
     def rhs(t, y):
-        law_rates(y.reshape(4, 1), reference.table(np.array([t])), gains, limits, rates)
-        return rates[:, 0].copy()
+        evaluate(y.reshape(4, 1, 1), one.fields, one.limits, tuple(reference.table(np.array([t]))[0]), targets, 0,
+                 offsets, kinds, order, parents, branch, sin_floor, instant)
+        v, omega = instant[kn.I_V, 0, 0], instant[kn.I_OMEGA, 0, 0]
+        return np.array([v * math.cos(y[2]), v * math.sin(y[2]), omega, instant[kn.I_XI_DOT, 0, 0]])
 
-    solution = solve_ivp(rhs, (0.0, duration), state0, method="RK45", rtol=settings.rtol, atol=settings.atol,
+    solution = solve_ivp(rhs, (0.0, duration), one.state0, method="RK45", rtol=settings.rtol, atol=settings.atol,
                          max_step=duration * settings.max_step_fraction)
     if not solution.success:
         raise RuntimeError(f"solve_ivp failed: {solution.message}")
@@ -174,13 +194,13 @@ class _HermiteTable:
                    float(reference.direction))
 
 
-def _compiled_steps(law, table, state0, gains, limits, duration, settings):
-    run = _dormand_prince(law)
+def _compiled_steps(law, fields_class, table, one: _OneRobot, duration, settings):
+    run = _dormand_prince(law, fields_class)
     capacity = 4096
     while True:
         t_out = np.empty(capacity)
         y_out = np.empty((capacity, 4))
-        count = run(state0, gains[:, 0].copy(), limits[:, 0].copy(), table.flat, table.spacing, table.direction,
+        count = run(one.state0, one.fields[:, 0, 0].copy(), one.limits[:, 0, 0].copy(), table.flat, table.spacing, table.direction,
                     duration, settings.rtol, settings.atol, duration * settings.max_step_fraction, t_out, y_out)
         if count > 0:
             return t_out[:count], y_out[:count]
@@ -224,10 +244,10 @@ def _reference_row(flat, spacing, direction, t):
             omega)
 
 
-def _dormand_prince(law):
+def _dormand_prince(law, fields_class):
     """The compiled solver loop for ``law`` (cached per law, on disk by numba)."""
     if law not in _DORMAND_PRINCE:
-        _DORMAND_PRINCE[law] = _make_dormand_prince(law)
+        _DORMAND_PRINCE[law] = _make_dormand_prince(law, fields_class)
     return _DORMAND_PRINCE[law]
 
 
@@ -238,7 +258,7 @@ _DORMAND_PRINCE: dict = {}
 def _rates_at(law, t, y, flat, spacing, direction, gains_i, v_max, omega_max, out):
     """Closed-loop state rates (ẋ, ẏ, θ̇, ξ̇) of one robot at time t into ``out``."""
     ref = _reference_row(flat, spacing, direction, t)
-    v, omega, xi_dot, _, _, _, cos_t, sin_t = command_at(law, y[0], y[1], y[2], y[3], ref, gains_i, v_max, omega_max)
+    v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(law, gains_i, y[0], y[1], y[2], y[3], ref, v_max, omega_max)
     out[0], out[1], out[2] = unicycle_rates(v, omega, cos_t, sin_t)
     out[3] = xi_dot
 
@@ -251,16 +271,17 @@ def _rms(values):
     return math.sqrt(total / values.size)
 
 
-def _make_dormand_prince(law):
+def _make_dormand_prince(law, fields_class):
     # Only this closure captures ``law`` (and module-level functions): numba then caches it
-    # on disk across processes (see nonholo.sim.kernel.make_integrator).
+    # on disk across processes (see nonholo.sim.kernel.make_kernel).
     stable_cache_identity(law)
+    n_fields = len(fields_class._fields)
 
     @njit(**_OPTIONS)
     def run(y0, gains, limits, flat, spacing, direction, t_end, rtol, atol, max_step, t_out, y_out):
         """Integrate from 0 to t_end; store every accepted step (t = 0 first). Returns the
         number of samples, 0 if ``t_out`` is too short, −1 if the step size collapsed."""
-        gains_i = gains_of(gains.reshape(MAX_GAINS, 1), 0)
+        gains_i = fields_class(*field_row(gains.reshape(kn.MAX_FIELDS, 1, 1), 0, 0)[:n_fields])
         v_max, omega_max = limits[0], limits[1]
         n = 4
         K = np.empty((7, n))
