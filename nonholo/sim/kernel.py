@@ -204,6 +204,35 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
         stage_command[s, 0, r, b], stage_command[s, 1, r, b] = values[3], values[4]
 
 
+@njit(inline="always", **_OPTIONS)
+def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
+    """One classical RK4 step of a root under ``law``, the four stages in registers: the new
+    (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate measures."""
+    half = 0.5 * h
+    v1, w1, e1, _, _, _, c, s = root_command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
+    a1, b1, c1 = unicycle_rates(v1, w1, c, s)
+    x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
+    v2, w2, e2, _, _, _, c, s = root_command(law, gains, x2, y2, t2, xi2, r1, v_max, omega_max)
+    a2, b2, c2 = unicycle_rates(v2, w2, c, s)
+    x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * e2
+    v3, w3, e3, _, _, _, c, s = root_command(law, gains, x3, y3, t3, xi3, r1, v_max, omega_max)
+    a3, b3, c3 = unicycle_rates(v3, w3, c, s)
+    x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * e3
+    v4, w4, e4, _, _, _, c, s = root_command(law, gains, x4, y4, t4, xi4, r2, v_max, omega_max)
+    a4, b4, c4 = unicycle_rates(v4, w4, c, s)
+    sixth = h / 6.0
+    return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
+             rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
+            (x, y, theta, xi, e1, v1, w1), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
+            (x4, y4, t4, xi4, e4, v4, w4))
+
+
+@njit(inline="always", **_OPTIONS)
+def stage_rate(stage, xi_speed):
+    """The fastest rate of one root stage: |ω|, and |ξ̇/ξ| of a speed compensator."""
+    return max(abs(stage[6]), xi_speed * abs(stage[4]) / max(abs(stage[3]), 1e-300))
+
+
 def stable_cache_identity(dispatcher, _seen=None) -> None:
     """Give ``dispatcher`` and every compiled function its code calls (recursively) a
     deterministic pickling identity.
@@ -266,6 +295,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     posture_b = gains_b._fields[:3] == ("goal_x", "goal_y", "goal_theta")
     # Turn rates not known in advance (followers, posture laws' start-up) are measured.
     measuring = followers or posture_a or posture_b
+    two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
 
     @njit(inline="always", **_OPTIONS)
     def root_errors(posture, fields, r, b, x, y, theta, ref):
@@ -277,9 +307,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         ex, ey = gx - x, gy - y
         return math.sqrt(ex * ex + ey * ey), wrap_angle(gtheta - theta)
 
-    @njit(**_OPTIONS)
-    def evaluate(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
-                 instant):
+    @njit(inline="always", **_OPTIONS)
+    def evaluate_at(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
+                    instant):
         for position in range(order.size):
             r = order[position]
             kind = kinds[r]
@@ -289,7 +319,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                 v_max, omega_max = limits[0, r, b], limits[1, r, b]
                 out1 = out2 = rate1 = rate2 = sin_gamma = singular = xi_dot = 0.0
                 if kind == ROOT_A or kind == ROOT_B:
-                    if kind == ROOT_A:
+                    if not (two_laws and kind == ROOT_B):
                         v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
                             law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, v_max, omega_max)
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, ref)
@@ -320,6 +350,12 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                 instant[I_OUT1, r, b], instant[I_OUT2, r, b] = out1, out2
                 instant[I_ERR1, r, b], instant[I_ERR2, r, b] = err1, err2
                 instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b] = rate1, rate2, sin_gamma
+
+    @njit(**_OPTIONS)
+    def evaluate(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
+                 instant):
+        evaluate_at(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
+                    instant)
 
     @njit(inline="always", **_OPTIONS)
     def accumulate(state, instant, held, sampled_data, t, k, kinds, fields, d_max, stats, pair_stats, record,
@@ -405,18 +441,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                         pair_stats[BELOW_ANY, b] += 1.0
 
     @njit(inline="always", **_OPTIONS)
-    def root_stage(kind, fields, r, b, x, y, theta, xi, ref, v_max, omega_max):
-        """(ẋ, ẏ, θ̇, ξ̇, v, ω) of a root at one RK4 stage."""
-        if kind == ROOT_A:
-            v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(
-                law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, v_max, omega_max)
-        else:
-            v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(
-                law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
-        dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
-        return dx, dy, dtheta, xi_dot, v, omega
-
-    @njit(inline="always", **_OPTIONS)
     def follower_stage(kind, x, y, theta, parent_1, parent_2, branch, target, k1, k2, d, sin_floor, v_max, omega_max):
         """(ẋ, ẏ, θ̇, v, ω) of a follower at one RK4 stage; ``parent_i`` = (x, y, θ, v, ω) of
         its parents at that stage, ``target`` = (z1_d, z2_d, ż1_d, ż2_d)."""
@@ -455,26 +479,22 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             elif kind == ROOT_A or kind == ROOT_B:
                 feeding = followers and feeds[r] != 0
                 for b in range(n_batch):
-                    x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    v_max, omega_max = limits[0, r, b], limits[1, r, b]
-                    a1, b1, c1, d1, v1, w1 = root_stage(kind, fields, r, b, x, y, theta, xi, r0, v_max, omega_max)
-                    x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * d1
-                    a2, b2, c2, d2, v2, w2 = root_stage(kind, fields, r, b, x2, y2, t2, xi2, r1, v_max, omega_max)
-                    x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * d2
-                    a3, b3, c3, d3, v3, w3 = root_stage(kind, fields, r, b, x3, y3, t3, xi3, r1, v_max, omega_max)
-                    x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * d3
-                    a4, b4, c4, d4, v4, w4 = root_stage(kind, fields, r, b, x4, y4, t4, xi4, r2, v_max, omega_max)
-                    state[0, r, b] = rk4_sum(x, sixth, a1, a2, a3, a4)
-                    state[1, r, b] = rk4_sum(y, sixth, b1, b2, b3, b4)
-                    state[2, r, b] = rk4_sum(theta, sixth, c1, c2, c3, c4)
-                    state[3, r, b] = rk4_sum(xi, sixth, d1, d2, d3, d4)
+                    if not (two_laws and kind == ROOT_B):
+                        new, s1, s2, s3, s4 = root_rk4(
+                            law_a, gains_a(*field_row(fields, r, b)[:n_a]), state[0, r, b], state[1, r, b],
+                            state[2, r, b], state[3, r, b], r0, r1, r2, h, limits[0, r, b], limits[1, r, b])
+                    else:
+                        new, s1, s2, s3, s4 = root_rk4(
+                            law_b, gains_b(*field_row(fields, r, b)[:n_b]), state[0, r, b], state[1, r, b],
+                            state[2, r, b], state[3, r, b], r0, r1, r2, h, limits[0, r, b], limits[1, r, b])
+                    state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = new
                     if measuring:
-                        peak = max(peak, abs(w1), abs(w2), abs(w3), abs(w4),
-                                   xi_speed * max(abs(d1) / max(abs(xi), 1e-300), abs(d2) / max(abs(xi2), 1e-300),
-                                                  abs(d3) / max(abs(xi3), 1e-300), abs(d4) / max(abs(xi4), 1e-300)))
+                        peak = max(peak, stage_rate(s1, xi_speed), stage_rate(s2, xi_speed), stage_rate(s3, xi_speed),
+                                   stage_rate(s4, xi_speed))
                     if feeding:
-                        store_stages(stage_pose, stage_command, r, b, (x, y, theta, v1, w1), (x2, y2, t2, v2, w2),
-                                     (x3, y3, t3, v3, w3), (x4, y4, t4, v4, w4))
+                        store_stages(stage_pose, stage_command, r, b, (s1[0], s1[1], s1[2], s1[5], s1[6]),
+                                     (s2[0], s2[1], s2[2], s2[5], s2[6]), (s3[0], s3[1], s3[2], s3[5], s3[6]),
+                                     (s4[0], s4[1], s4[2], s4[5], s4[6]))
             elif followers:
                 # Followers are few and their laws long: their four stages run as a loop (not
                 # unrolled), which keeps the compiled code small.
@@ -541,8 +561,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
             ref = row_values(rows, row)
-            evaluate(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
-                     instant)
+            evaluate_at(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
+                        instant)
             if sampled_data and k % hold_every == 0:
                 for r in range(n_robots):
                     for b in range(n_batch):
@@ -576,8 +596,15 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             if followers:
                 update_branches(state, fields, kinds, parents, branch)
             ref = row_values(rows, k)
-            evaluate(state, fields, limits, ref, targets, k, offsets, kinds, order, parents, branch, sin_floor, instant)
+            evaluate_at(state, fields, limits, ref, targets, k, offsets, kinds, order, parents, branch, sin_floor,
+                        instant)
             accumulate(state, instant, held, False, ref[0], k, kinds, fields, d_max, stats, pair_stats, record,
                        recording)
 
+    # Inner compiled functions are closures too: give each an identity that names this
+    # kernel's laws, so numba's disk cache finds them in the next process and never mixes
+    # two kernels up (see stable_cache_identity).
+    identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
+    for function in (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score):
+        function._set_uuid(f"{__name__}.make_kernel[{identity}].{function.py_func.__name__}")
     return integrate, evaluate, score

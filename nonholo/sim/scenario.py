@@ -13,6 +13,7 @@ Bluetooth piconet of the thesis: one master (a single root) and at most 7 slaves
 """
 from __future__ import annotations
 
+import heapq
 import math
 import numbers
 from dataclasses import dataclass, field
@@ -294,10 +295,14 @@ class Scenario:
 
     def order(self) -> tuple[int, ...]:
         """Robot indices parents-first (stable: file order among ready robots)."""
-        return topological_order(self.robots)
+        if "_order" not in self.__dict__:
+            object.__setattr__(self, "_order", topological_order(self.robots))
+        return self.__dict__["_order"]
 
     def initial_poses(self) -> list[tuple[float, float, float]]:
         """Axle poses at t = 0, resolving leader-frame and in-formation starts parents-first."""
+        if not self.followers:
+            return [r.start for r in self.robots]
         poses: dict[str, tuple[float, float, float]] = {}
         for i in self.order():
             robot = self.robots[i]
@@ -313,6 +318,11 @@ class Scenario:
         return [poses[name] for name in self.names]
 
     def components(self) -> list[tuple[int, ...]]:
+        if "_components" not in self.__dict__:
+            object.__setattr__(self, "_components", self._find_components())
+        return self.__dict__["_components"]
+
+    def _find_components(self) -> list[tuple[int, ...]]:
         """The connected formations (weakly connected parts of the graph), each as robot
         indices parents-first; a lone robot is a component of its own."""
         names = self.names
@@ -324,9 +334,10 @@ class Scenario:
                 i = group[i]
             return i
 
+        index = {name: i for i, name in enumerate(names)}
         for i, robot in enumerate(self.robots):
             for parent in robot.parents:
-                group[find(i)] = find(names.index(parent))
+                group[find(i)] = find(index[parent])
         parts: dict[int, list[int]] = {}
         for i in self.order():
             parts.setdefault(find(i), []).append(i)
@@ -334,19 +345,30 @@ class Scenario:
 
 
 def topological_order(robots) -> tuple[int, ...]:
-    """Kahn's algorithm over the parent links; ``FormationError`` names a cycle."""
-    names = [r.name for r in robots]
-    parents = {r.name: r.parents for r in robots}
+    """Kahn's algorithm over the parent links, the lowest index first among the robots ready
+    (so file order where links allow); ``FormationError`` names a cycle."""
+    index = {r.name: i for i, r in enumerate(robots)}
+    waiting = [0] * len(robots)
+    children: dict[int, list[int]] = {}
+    for i, robot in enumerate(robots):
+        for parent in robot.parents:
+            if parent in index:
+                waiting[i] += 1
+                children.setdefault(index[parent], []).append(i)
+    ready = [i for i, count in enumerate(waiting) if count == 0]
+    heapq.heapify(ready)
     done: list[int] = []
-    placed: set[str] = set()
-    remaining = list(range(len(robots)))
-    while remaining:
-        ready = next((i for i in remaining if all(p in placed for p in parents[names[i]])), None)
-        if ready is None:
-            raise FormationError(None, "formation", f"the leader links form a cycle: {_find_cycle(parents, placed)}")
-        done.append(ready)
-        placed.add(names[ready])
-        remaining.remove(ready)
+    while ready:
+        i = heapq.heappop(ready)
+        done.append(i)
+        for child in children.get(i, ()):
+            waiting[child] -= 1
+            if waiting[child] == 0:
+                heapq.heappush(ready, child)
+    if len(done) < len(robots):
+        placed = {robots[i].name for i in done}
+        parents = {r.name: r.parents for r in robots}
+        raise FormationError(None, "formation", f"the leader links form a cycle: {_find_cycle(parents, placed)}")
     return tuple(done)
 
 

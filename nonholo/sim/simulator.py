@@ -150,6 +150,7 @@ class Group:
         self.offsets = np.zeros((2, n_robots, n_batch))
         self.d_max = np.zeros(n_batch)
         self.xi_speed = 0.0
+        vectors: dict[int, np.ndarray] = {}   # configs are usually shared by many robots
         for b, (member, indices) in enumerate(copies):
             for j, i in enumerate(indices):
                 robot = scenarios[member].robots[i]
@@ -157,12 +158,14 @@ class Group:
                 self.limits[:, j, b] = robot.v_max, robot.omega_max
                 if isinstance(robot, Robot):
                     config = robot.controller
-                    vector = config.gain_vector()
+                    if id(config) not in vectors:
+                        vectors[id(config)] = config.gain_vector()
+                        self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
+                    vector = vectors[id(config)]
                     if robot.posture:
                         vector = np.concatenate([robot.goal, vector])
                     self.fields[:vector.size, j, b] = vector
                     self.state[3, j, b] = initial_state(config, v_d0, robot.name)
-                    self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
                 else:
                     self.fields[kn.K1, j, b], self.fields[kn.K2, j, b] = robot.k1, robot.k2
                     self.fields[kn.OFFSET_D, j, b] = robot.d
@@ -231,15 +234,17 @@ def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
             "(position or its first two derivatives): use a formula defined and smooth over the whole run")
 
 
-def _prior_rate(robots, v_peak: float, omega_peak: float) -> float:
+def _prior_rate(robots, v_peak: float, omega_peak: float, known: dict) -> float:
     """The fastest rate known in advance: root laws' stiffness (and the reference's turn
-    rate, for laws that track it), followers' gains."""
+    rate, for laws that track it), followers' gains. ``known`` caches it per configuration."""
     rate = 0.0
     for robot in robots:
         if isinstance(robot, Robot):
-            spec = robot.controller.controller
-            rate = max(rate, robot.controller.stiffness(v_peak, omega_peak),
-                       omega_peak if spec.needs_moving_reference else 0.0)
+            config = robot.controller
+            if id(config) not in known:
+                known[id(config)] = max(config.stiffness(v_peak, omega_peak),
+                                        omega_peak if config.controller.needs_moving_reference else 0.0)
+            rate = max(rate, known[id(config)])
         else:
             rate = max(rate, robot.k1, robot.k2)
     return rate
@@ -250,6 +255,8 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     index = {n: i for i, n in enumerate(first.names)}
     poses = [s.initial_poses() for s in scenarios]
     by_key = defaultdict(list)
+    known: dict = {}
+    plans: dict[float, np.ndarray] = {}
     for component in first.components():
         robots = [first.robots[i] for i in component]
         laws = tuple(dict.fromkeys((r.controller.law, r.controller.controller.gain_tuple)
@@ -257,10 +264,16 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         if len(laws) > 2:
             raise NonholoInputError(f"robots {', '.join(r.name for r in robots if isinstance(r, Robot))} form one "
                                     "connected formation with more than two different root controllers (at most two)")
-        prior = prior_plan(first, _prior_rate(robots, v_peak, omega_peak))
-        local = {first.names[i]: j for j, i in enumerate(component)}
-        shape = tuple(_structure(r, first, local) for r in robots)
-        by_key[laws, shape, prior.tobytes()].append((component, prior))
+        rate = _prior_rate(robots, v_peak, omega_peak, known)
+        if rate not in plans:
+            plans[rate] = prior_plan(first, rate)
+        prior = plans[rate]
+        if len(robots) == 1:
+            shape = (_structure(robots[0], first, {}),)
+        else:
+            local = {first.names[i]: j for j, i in enumerate(component)}
+            shape = tuple(_structure(r, first, local) for r in robots)
+        by_key[laws, shape, id(prior)].append((component, prior))
     groups = []
     for (laws, _, _), entries in by_key.items():
         copies = [(member, component) for member in range(len(scenarios)) for component, _ in entries]
@@ -305,7 +318,10 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
                 records[:, :, indices, member] = g_record[:, :, :, b]
             substeps[indices] = plan.max()
         _check_diverged(group, g_stats)
-    rows = first.reference.table(grid) if first.reference is not None else None
+    rows = None
+    if first.reference is not None:   # every plan's stage rows include the output grid
+        stage_rows, row_start, _ = next(iter(reference_cache.values()), (None, None, None))
+        rows = stage_rows[row_start] if stage_rows is not None else first.reference.table(grid)
     return SimulationResult(scenarios=tuple(scenarios), t=grid, reference_rows=rows, stats=stats,
                             pair_stats=pair_stats, record=records if record else None, substeps=substeps,
                             elapsed_s=time.perf_counter() - started)
