@@ -11,21 +11,18 @@
   jump of a step change), the claim of thesis §5.6;
 * "differences from the thesis" generated from those numbers, citing the spec's errata.
 
-The table/result machinery here (``SpecValue``, ``Table``, ``TabulatedStudyResult``) is
-shared with the posture study (``nonholo.studies.posture``).
+Tables, findings and the comparisons with the spec use the shared framework
+(``nonholo.studies.framework``).
 
 Quick mode (``--quick``): dt = 0.02 s instead of 0.01 s and a shorter GIF (grid means
 move by ≈ k·dt/2 relative, so a few spec comparisons are then looser).
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import math
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +32,9 @@ from nonholo.formation import (Follower, Formation, FormationResult, link_state,
                                simulate_formation)
 from nonholo.formation.schedule import target_segments
 from nonholo.sim.files import load_scenario
-from nonholo.studies.base import Study, StudyOptions, StudyResult
-from nonholo.studies.leader import Finding, _fmt, _text_table
-from nonholo.studies.report import escape, html_figure, html_list, html_table
+from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
+                                       TabulatedStudyResult, Table, degrees, show)
 
 QUICK_DT = 0.02
 GIF_FRAMES, QUICK_GIF_FRAMES = 60, 20
@@ -61,31 +58,6 @@ THESIS_CLAIM_MINIMIZES = ("the input-output feedback linearization for the follo
 THESIS_CLAIM_RUN_TIME = ("if the parameter values of the separation bearing and separation-separation controllers "
                          "are changed dynamically at run time, the feedback linearized control strategies "
                          "successfully minimizes the error")
-
-
-@dataclass(frozen=True)
-class SpecValue:
-    """A reference number as the spec prints it (``text``) and the range of our values
-    that reproduce it (``low`` ≤ ours ≤ ``high``; wide where the spec says a value is
-    integration-sensitive or round-off)."""
-
-    text: str
-    low: float
-    high: float
-    sensitive: bool = False  # integration-sensitive (near-singular passages, sampled peaks)
-
-    @classmethod
-    def approx(cls, value: float, rel: float = 0.0, abs_: float = 0.0, text: str | None = None,
-               sensitive: bool = False) -> "SpecValue":
-        slack = max(abs(value) * rel, abs_)
-        return cls(text or f"{value:g}", value - slack, value + slack, sensitive)
-
-    @classmethod
-    def below(cls, bound: float, text: str) -> "SpecValue":
-        return cls(text, -math.inf, bound)
-
-    def agrees(self, ours: float | None) -> bool:
-        return ours is not None and math.isfinite(ours) and self.low <= ours <= self.high
 
 
 # Source: shared spec follower-posture.md §6 (a)–(c) (reference simulation, RK4, dt = 0.01 s), §2.4,
@@ -132,160 +104,6 @@ SPEC_REFERENCE: dict[str, dict[str, SpecValue]] = {
     "ll-T1-bearings": {"phi_1F": SpecValue.approx(188.0, abs_=3.0, text="≈188°"),
                        "phi_2F": SpecValue.approx(270.0, abs_=3.0, text="≈270°")},
 }
-
-
-# ------------------------------------------------------------------ tables and the shared result class
-
-@dataclass(frozen=True)
-class Column:
-    """A table column: ``label``, the record ``key`` and how to show its value."""
-
-    label: str
-    key: str
-    show: Callable[[object], str] = field(default=lambda v: _show(v))
-
-
-def _show(value) -> str:
-    if value is None:
-        return "–"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, (int, float, np.floating)):
-        value = float(value)
-        if not math.isfinite(value):
-            return str(value)
-        return f"{value:.2e}" if value != 0 and abs(value) < 1e-3 else _fmt(abs(value)) if value >= 0 \
-            else "-" + _fmt(-value)
-    return str(value)
-
-
-def degrees(value) -> str:
-    return "–" if value is None else f"{value:.3f}°"
-
-
-@dataclass(frozen=True)
-class Table:
-    """Records (dicts of raw values, written to CSV/JSON) and the columns that show them."""
-
-    key: str
-    caption: str
-    columns: Sequence[Column]
-    records: Sequence[dict]
-
-    @property
-    def header(self) -> list[str]:
-        return [c.label for c in self.columns]
-
-    def rows(self) -> list[list[str]]:
-        return [[c.show(r.get(c.key)) for c in self.columns] for r in self.records]
-
-    def text(self) -> str:
-        return f"{self.caption}\n{_text_table(self.header, self.rows())}"
-
-    def html(self) -> str:
-        return html_table(self.header, self.rows(), self.caption)
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """One of our numbers beside the spec's reference value."""
-
-    case: str
-    quantity: str
-    ours: float | None
-    spec: SpecValue
-
-    @property
-    def agrees(self) -> bool:
-        return self.spec.agrees(self.ours)
-
-    def record(self) -> dict:
-        return {"case": self.case, "quantity": self.quantity, "ours": self.ours, "spec": self.spec.text,
-                "range": f"[{self.spec.low:.4g}, {self.spec.high:.4g}]", "sensitive": self.spec.sensitive,
-                "agrees": self.agrees}
-
-
-COMPARISON_COLUMNS = (Column("case", "case"), Column("quantity", "quantity"), Column("ours", "ours"),
-                      Column("spec", "spec"), Column("accepted range", "range"),
-                      Column("integration-sensitive", "sensitive"), Column("agrees", "agrees"))
-
-
-class TabulatedStudyResult(StudyResult):
-    """A study result made of ``tables()``, ``findings`` and figures (``write_figures``);
-    subclasses set ``name``, ``title``, ``runs`` (key → FormationResult) and implement
-    ``tables``, ``setup_text`` and ``write_figures``."""
-
-    runs: dict[str, FormationResult]
-    findings: list[Finding]
-    quick: bool
-
-    def tables(self) -> list[Table]:
-        raise NotImplementedError
-
-    def setup_text(self) -> str:
-        raise NotImplementedError
-
-    def write_figures(self, folder: Path) -> list[tuple[str, str]]:
-        """Write the figures into ``folder``; returns (file name, caption) pairs."""
-        raise NotImplementedError
-
-    @property
-    def ok(self) -> bool:
-        """False if any tabulated number is NaN or infinite (a broken simulation)."""
-        return all(math.isfinite(v) for table in self.tables() for record in table.records
-                   for v in record.values() if isinstance(v, (float, np.floating)))
-
-    def text(self) -> str:
-        lines = [self.title, "", self.setup_text(), ""]
-        for table in self.tables():
-            lines += [table.text(), ""]
-        lines += ["Differences from the thesis:"] + [f"- {f.text()}" for f in self.findings]
-        return "\n".join(lines)
-
-    def html_section(self, folder: Path) -> str:
-        parts = [f"<p>{escape(self.setup_text())}</p>", "<h2>Differences from the thesis</h2>",
-                 html_list(f.html() for f in self.findings), "<h2>Tables</h2>"]
-        parts += [table.html() for table in self.tables()]
-        parts.append("<h2>Figures</h2>")
-        for name, caption in self.write_figures(folder):
-            if name.endswith(".gif"):
-                parts.append(f'<figure><img src="{escape(folder.name)}/{escape(name)}" alt="{escape(caption)}">'
-                             f"<figcaption>{escape(caption)}</figcaption></figure>")
-            else:
-                parts.append(html_figure(f"{folder.name}/{name}", caption))
-        return "\n".join(parts)
-
-    def to_dict(self) -> dict:
-        return {"study": self.name, "quick": self.quick, "elapsed_s": self.elapsed_s, "setup": self.setup_text(),
-                "tables": {t.key: {"caption": t.caption, "records": [_json_ready(r) for r in t.records]}
-                           for t in self.tables()},
-                "findings": [dataclasses.asdict(f) for f in self.findings],
-                "runs": {key: run.to_dict() for key, run in self.runs.items()}}
-
-    def write_data(self, folder: Path) -> list[Path]:
-        paths = []
-        for table in self.tables():
-            path = folder / f"{self.name}-{table.key}.csv"
-            keys = list(dict.fromkeys(k for r in table.records for k in r))
-            with open(path, "w", newline="") as handle:
-                writer = csv.DictWriter(handle, keys)
-                writer.writeheader()
-                writer.writerows({k: _csv_value(r.get(k)) for k in keys} for r in table.records)
-            paths.append(path)
-        data = folder / f"{self.name}.json"
-        data.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
-        return paths + [data]
-
-
-def _json_ready(record: dict) -> dict:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else
-                float(v) if isinstance(v, np.floating) else v) for k, v in record.items()}
-
-
-def _csv_value(value) -> str:
-    if value is None:
-        return ""
-    return f"{value:.10g}" if isinstance(value, (float, np.floating)) else str(value)
 
 
 # ------------------------------------------------------------------ the cases
@@ -341,11 +159,15 @@ def wedge_variants(wedge: Formation) -> dict[str, Formation]:
             f"wedge-T4, dt = {wedge.dt / 4:g} s": dataclasses.replace(wedge, dt=wedge.dt / 4)}
 
 
-def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
+def all_cases(quick: bool = False) -> dict[str, Formation]:
     """Every run of the study: the six cases (``CASE_TITLES``) and the wedge variants."""
     cases = build_cases(quick)
     cases.update(wedge_variants(cases["wedge-T4"]))
-    return {key: simulate_formation(formation) for key, formation in cases.items()}
+    return cases
+
+
+def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
+    return {key: simulate_formation(formation) for key, formation in all_cases(quick).items()}
 
 
 # ------------------------------------------------------------------ numbers
@@ -487,6 +309,7 @@ class FormationStudyResult(TabulatedStudyResult):
 
     name = "formation"
     title = "Formations: thesis §5.5–5.6 reproduced (Figures 5.39–5.45)"
+    spec_file = "follower-posture.md"
 
     def __init__(self, runs: dict[str, FormationResult], quick: bool, elapsed_s: float, gif_frames: int = GIF_FRAMES):
         self.runs, self.quick, self.elapsed_s, self.gif_frames = runs, quick, elapsed_s, gif_frames
@@ -514,18 +337,18 @@ class FormationStudyResult(TabulatedStudyResult):
         return [
             Table("links", "Follower output errors (|z − z_d|: separations in m, bearings in rad; means over the "
                   "uniform grid) and the deviation from the exact closed loop e0·e^(−kt)",
-                  [Column("case", "case"), Column("follower", "follower"), Column("outputs", "outputs"),
-                   Column("|e1(0)|", "e1_start"), Column("|e2(0)|", "e2_start"), Column("final |e1|", "e1_final"),
+                  [Column("case", "case"), Column("follower", "follower"), Column("outputs", "outputs", terminal=False),
+                   Column("|e1(0)|", "e1_start", terminal=False), Column("|e2(0)|", "e2_start", terminal=False), Column("final |e1|", "e1_final"),
                    Column("final |e2|", "e2_final"), Column("mean |e1|", "e1_mean"), Column("mean |e2|", "e2_mean"),
-                   Column("max |e − e0·e^(−kt)|", "exactness"), Column("min |sin(γ1−γ2)|", "min_sin"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("peak |ω| (rad/s)", "peak_omega")], self.links),
+                   Column("max |e − e0·e^(−kt)|", "exactness"), Column("min |sin(γ1−γ2)|", "min_sin", terminal=False),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False), Column("peak |ω| (rad/s)", "peak_omega", terminal=False)], self.links),
             Table("switch", f"Eq 5.9: φ_d = π/3 → π + π/3 at t = {THESIS_EQ_5_9['at']:g} s on Test 4 (2 % settling band "
                   "of the π step; analytic ln 50 / k2)",
                   [Column("case", "case"), Column("settling (s)", "settling"), Column("analytic (s)", "analytic"),
-                   Column("|φ error − ideal step| at the next sample (rad)", "onset"),
-                   Column("max |l − l_d| after (m)", "l_disturbance"), Column("castor point passes", "passes"),
+                   Column("|φ error − ideal step| at the next sample (rad)", "onset", terminal=False),
+                   Column("max |l − l_d| after (m)", "l_disturbance", terminal=False), Column("castor point passes", "passes"),
                    Column("min axle distance after (m)", "min_distance_after"),
-                   Column("peak |v| after (m/s)", "peak_v_after"), Column("peak |ω| after (rad/s)", "peak_omega_after")],
+                   Column("peak |v| after (m/s)", "peak_v_after", terminal=False), Column("peak |ω| after (rad/s)", "peak_omega_after", terminal=False)],
                   [self.switch]),
             Table("bearings", "Eq 5.10: final bearings of the l–l follower F from the leader (φ_1F) and from R2 (φ_2F), "
                   "beside the values the thesis prints (not outputs of the l–l law)",
@@ -534,20 +357,21 @@ class FormationStudyResult(TabulatedStudyResult):
                    Column("φ_2F Eq 5.10", "eq_phi_2F")], self.bearings),
             Table("wedge", "The wedge (spec §3.3) under three integrations: the side of the leader–R2 line that F "
                   "ends on (Eq 5.10's 240°/120° or the mirror image 300°/60°) is decided near the singularity",
-                  [Column("run", "case"), Column("dt (s)", "dt"), Column("max sub-steps", "max_substeps"),
+                  [Column("run", "case"), Column("dt (s)", "dt"), Column("max sub-steps", "max_substeps", terminal=False),
                    Column("min |sin(γ1−γ2)|", "min_sin"), Column("at t (s)", "min_sin_time"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("max |e − e0·e^(−kt)| (m)", "exactness"),
-                   Column("final |l13 − 2|", "e1_final"), Column("final |l23 − 2|", "e2_final"),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False),
+                   Column("max |e − e0·e^(−kt)| (m)", "exactness", terminal=False),
+                   Column("final |l13 − 2|", "e1_final", terminal=False), Column("final |l23 − 2|", "e2_final", terminal=False),
                    Column("φ_1F", "phi_1F", degrees), Column("φ_2F", "phi_2F", degrees)], self.wedge),
             Table("safety", "Clearance (thesis §2.5.1 asks for l > 2d) and duration per case: closest pair of axle "
                   "centres over the run, first follower's axle distance to its leader at the end",
                   [Column("case", "case"), Column("closest pair", "pair"), Column("min distance (m)", "min_distance"),
                    Column("at t (s)", "min_distance_time"), Column("final distance (m)", "final_distance"),
-                   Column("2d (m)", "two_d"), Column("time below 2d (s)", "time_below_2d"),
-                   Column("T (s)", "duration")], self.safety),
+                   Column("2d (m)", "two_d"), Column("time below 2d (s)", "time_below_2d", terminal=False),
+                   Column("T (s)", "duration", terminal=False)], self.safety),
             Table("spec", "Our numbers beside the spec's reference numbers (follower-posture.md §6 (a)–(c), §2.4, "
                   "§3.3; finals are round-off: reproduced below 1e-9; means within 1.2 %: grid vs continuous means)",
-                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons]),
+                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons], terminal=False),
         ]
 
     def setup_text(self) -> str:
@@ -621,7 +445,7 @@ def _run_time_change(result: FormationStudyResult) -> Finding:
     return Finding(f"Thesis §5.6: “{THESIS_CLAIM_RUN_TIME}” (Eq 5.9)", "holds" if holds else "fails" if not settled
                    else "partly",
                    f"after the π step at {s['at']:g} s the bearing settles into the 2 % band in "
-                   f"{_show(s['settling'])} s (analytic ln 50/k2 = {s['analytic']:.3f} s), l stays within "
+                   f"{show(s['settling'])} s (analytic ln 50/k2 = {s['analytic']:.3f} s), l stays within "
                    f"{s['l_disturbance']:.1e} m of l_d, and the castor point passes {s['passes']} the leader "
                    f"(closest axle distance after the change {s['min_distance_after']:.3f} m).",
                    "Eq 5.9 does not say which way a ±π change turns: under a wrapped error round-off decides "
@@ -689,16 +513,15 @@ def _speed_demands(result: FormationStudyResult) -> Finding:
 
 
 def _spec_agreement(result: FormationStudyResult) -> Finding:
-    robust = [c for c in result.comparisons if not c.spec.sensitive]
-    sensitive = [c for c in result.comparisons if c.spec.sensitive]
-    missing = [c for c in robust if not c.agrees]
+    agreement = Agreement.of(result.comparisons)
+    missing = [c for c in agreement.robust if not c.agrees]
     return Finding("Spec reference numbers (follower-posture.md §6)", "holds" if not missing else "partly",
-                   f"{sum(c.agrees for c in robust)} of {len(robust)} robust values reproduced"
-                   + (" (not " + ", ".join(f"{c.case} {c.quantity}: ours {_show(c.ours)}, spec {c.spec.text}"
+                   f"{sum(c.agrees for c in agreement.robust)} of {len(agreement.robust)} robust values reproduced"
+                   + (" (not " + ", ".join(f"{c.case} {c.quantity}: ours {show(c.ours)}, spec {c.spec.text}"
                                            for c in missing) + ")" if missing else "")
-                   + f"; {sum(c.agrees for c in sensitive)} of {len(sensitive)} integration-sensitive values of the "
-                   "near-singular wedge (" + ", ".join(f"{c.quantity} {'yes' if c.agrees else 'no'}" for c in sensitive)
-                   + ").",
+                   + f"; {sum(c.agrees for c in agreement.sensitive)} of {len(agreement.sensitive)} "
+                   "integration-sensitive values of the near-singular wedge ("
+                   + ", ".join(f"{c.quantity} {'yes' if c.agrees else 'no'}" for c in agreement.sensitive) + ").",
                    "QUICK MODE: the coarser grid moves grid means and sampled peaks." if result.quick and missing else
                    "the wedge's numbers depend on how the passage near sin(γ1 − γ2) = 0 is integrated (see the wedge "
                    "table).")
@@ -708,7 +531,13 @@ def _spec_agreement(result: FormationStudyResult) -> Finding:
 
 def run_formation(options: StudyOptions) -> FormationStudyResult:
     started = time.perf_counter()
-    runs = simulate_cases(options.quick)
+    cases = all_cases(options.quick)
+    runs = {}
+    with options.progress_for("study formation", len(cases), "runs") as progress:
+        for key, case in cases.items():
+            progress.start(key)
+            runs[key] = simulate_formation(case)
+            progress.done()
     return FormationStudyResult(runs, options.quick, time.perf_counter() - started,
                                 QUICK_GIF_FRAMES if options.quick else GIF_FRAMES)
 
@@ -717,6 +546,7 @@ STUDY = Study(
     name="formation", title=FormationStudyResult.title,
     summary="l-phi and l-l followers on Tests 1 and 4, the Eq 5.9 change, Eq 5.10 bearings; thesis §5.5-5.6",
     run=run_formation,
+    order=2,
 )
 
 

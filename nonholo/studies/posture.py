@@ -27,9 +27,9 @@ from nonholo.formation import Formation, FormationResult, simulate_formation
 from nonholo.formation.geometry import wrap
 from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions
-from nonholo.studies.formation import (COMPARISON_COLUMNS, QUICK_DT, Column, Comparison, SpecValue,
-                                       TabulatedStudyResult, Table, _show)
-from nonholo.studies.leader import Finding
+from nonholo.studies.formation import QUICK_DT
+from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
+                                       TabulatedStudyResult, Table, show)
 
 LAWS = ("time-varying", "polar", "dynamic-feedback-posture")
 EXAMPLES = {"time-varying": "posture-time-varying", "polar": "posture-polar",
@@ -144,8 +144,11 @@ def build_cases(quick: bool = False) -> dict[str, Formation]:
     return cases
 
 
+all_cases = build_cases
+
+
 def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
-    return {key: simulate_formation(formation) for key, formation in build_cases(quick).items()}
+    return {key: simulate_formation(formation) for key, formation in all_cases(quick).items()}
 
 
 # ------------------------------------------------------------------ numbers
@@ -199,6 +202,7 @@ def initial_lateral_error(start, goal) -> float:
 class PostureStudyResult(TabulatedStudyResult):
     name = "posture"
     title = "Posture stabilization: thesis §5.7–5.8 reproduced (Figures 5.46–5.51)"
+    spec_file = "follower-posture.md"
 
     def __init__(self, runs: dict[str, FormationResult], quick: bool, elapsed_s: float):
         self.runs, self.quick, self.elapsed_s = runs, quick, elapsed_s
@@ -219,19 +223,21 @@ class PostureStudyResult(TabulatedStudyResult):
         main = [dict(self.record(law, goal), figure=THESIS_FIGURES[(law, goal)],
                      thesis=THESIS_STATEMENTS[(law, goal)]) for law in LAWS for goal in GOALS]
         variants = [r for k, r in self.records.items() if k not in {case_key(l, g) for l in LAWS for g in GOALS}]
-        columns = [Column("case", "case"), Column("goal", "goal"), Column("T (s)", "T"),
-                   Column("final distance (m)", "distance"), Column("max distance, last 10 s (m)", "distance_late_max"),
+        columns = [Column("case", "case"), Column("goal", "goal", terminal=False), Column("T (s)", "T", terminal=False),
+                   Column("final distance (m)", "distance"),
+                   Column("max distance, last 10 s (m)", "distance_late_max", terminal=False),
                    Column("final heading error", "heading_deg", lambda v: f"{v:.3g}°"),
-                   Column(f"time to stay within {NEAR:g} m (s)", "near_time"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("peak |ω| (rad/s)", "peak_omega")]
+                   Column(f"within {NEAR:g} m after (s)", "near_time"),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False), Column("peak |ω| (rad/s)", "peak_omega", terminal=False)]
         return [
             Table("runs", "Thesis runs from (−10, −10), heading 0, to each goal with heading 0, beside the thesis's "
                   "statements (§5.8; it prints no numbers)",
-                  [*columns[:2], Column("thesis figure", "figure"), *columns[2:],
-                   Column("heading controlled", "heading_controlled"), Column("thesis (§5.8)", "thesis")], main),
+                  [*columns[:2], Column("thesis figure", "figure", terminal=False), *columns[2:],
+                   Column("heading controlled", "heading_controlled", terminal=False),
+                   Column("thesis (§5.8)", "thesis")], main),
             Table("variants", "Variants that explain §5.8 (spec §5.2 (a)/(b), §5.3, §5.1)", columns, variants),
             Table("spec", "Our numbers beside the spec's reference numbers (follower-posture.md §6 (d))",
-                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons]),
+                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons], terminal=False),
         ]
 
     def setup_text(self) -> str:
@@ -274,7 +280,7 @@ def _polar_claim(result: PostureStudyResult) -> Finding:
     hovers = fault["distance"] < 1.0 and fault["distance_late_max"] > CONVERGED
     return Finding(f"Thesis §5.8: “{THESIS_POLAR_FAILS}”", "fails" if converged else "holds",
                    f"the polar law reaches (−10, 10): final distance {correct['distance']:.1e} m, heading error "
-                   f"{correct['heading_deg']:.1e}°, within {NEAR:g} m after {_show(correct['near_time'])} s (goal "
+                   f"{correct['heading_deg']:.1e}°, within {NEAR:g} m after {show(correct['near_time'])} s (goal "
                    f"origin: {result.record('polar', 'origin')['distance']:.1e} m). The failure appears only with an "
                    f"implementation error: without goal translation the robot parks at the origin, "
                    f"{untranslated['distance']:.2f} m from (−10, 10); with the distance measured from the world origin "
@@ -331,16 +337,14 @@ def _eq_5_11(result: PostureStudyResult) -> Finding:
 
 
 def _spec_agreement(result: PostureStudyResult) -> Finding:
-    robust = [c for c in result.comparisons if not c.spec.sensitive]
-    sensitive = [c for c in result.comparisons if c.spec.sensitive]
-    missing = [c for c in result.comparisons if not c.agrees]
+    agreement = Agreement.of(result.comparisons)
+    missing = agreement.missing
     reasons = ["QUICK MODE: the coarser grid moves the slow time-varying runs."] if result.quick and missing else []
     if any(c.case.startswith("polar") and c.quantity == "heading_deg" for c in missing):
         reasons.append(_polar_stop_note(result))
     return Finding("Spec reference numbers (follower-posture.md §6 (d))", "holds" if not missing else "partly",
-                   f"{sum(c.agrees for c in robust)} of {len(robust)} robust and {sum(c.agrees for c in sensitive)} of "
-                   f"{len(sensitive)} integration-sensitive values reproduced"
-                   + ("; not " + ", ".join(f"{c.case} {c.quantity} (ours {_show(c.ours)}, spec {c.spec.text})"
+                   agreement.counts()
+                   + ("; not " + ", ".join(f"{c.case} {c.quantity} (ours {show(c.ours)}, spec {c.spec.text})"
                                            for c in missing) if missing else "") + ".", " ".join(reasons))
 
 
@@ -352,7 +356,7 @@ def _polar_stop_note(result: PostureStudyResult) -> str:
         tolerance = run.formation.leaders[0].controller.gains["tolerance"]
         stop = time_within(run.t, goal_distance(run, pose), tolerance)
         heading = abs(math.degrees(float(wrap(run.trajectory("theta")[0, -1] - pose[2]))))
-        parts.append(f"goal {goal} at t = {_show(stop)} s with heading error {heading:.2g}°")
+        parts.append(f"goal {goal} at t = {show(stop)} s with heading error {heading:.2g}°")
     return (f"the polar law stops (v = ω = 0) once the distance is below its tolerance "
             f"({tolerance:g} m), freezing the heading error it has then: " + "; ".join(parts)
             + ". The spec's reference run does not state its stop rule.")
@@ -435,7 +439,13 @@ def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
 
 def run_posture(options: StudyOptions) -> PostureStudyResult:
     started = time.perf_counter()
-    runs = simulate_cases(options.quick)
+    cases = all_cases(options.quick)
+    runs = {}
+    with options.progress_for("study posture", len(cases), "runs") as progress:
+        for key, case in cases.items():
+            progress.start(key)
+            runs[key] = simulate_formation(case)
+            progress.done()
     return PostureStudyResult(runs, options.quick, time.perf_counter() - started)
 
 
@@ -443,4 +453,5 @@ STUDY = Study(
     name="posture", title=PostureStudyResult.title,
     summary="time-varying, polar and dynamic-FL posture laws from (-10,-10) to (0,0) and (-10,10); thesis §5.7-5.8",
     run=run_posture,
+    order=3,
 )

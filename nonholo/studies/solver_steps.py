@@ -35,10 +35,11 @@ import numpy as np
 from numba import njit
 
 from nonholo.models.unicycle import unicycle_rates
+from nonholo.references.feedforward import REF_V
 from nonholo.sim.kernel import MAX_GAINS, command_at, gains_of, new_stats, stable_cache_identity
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
-from nonholo.sim.simulator import _initial_states, integrator
+from nonholo.sim.simulator import compensator_start, integrator
 
 ENGINES = ("compiled", "scipy")
 _OPTIONS = dict(cache=True, error_model="numpy")
@@ -115,7 +116,7 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
         raise ValueError(f"unknown engine {engine!r} (valid: {', '.join(ENGINES)})")
     started = time.perf_counter()
     duration = scenario.duration
-    rows0 = scenario.reference.table(np.array([0.0]))
+    v_d0 = float(scenario.reference.table(np.array([0.0]))[0, REF_V])
     table = _HermiteTable.of(scenario.reference, duration) if engine == "compiled" else None
     stats = new_stats(len(scenario.robots))
     times = []
@@ -124,7 +125,7 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
         vector = robot.controller.gain_vector()
         gains[:vector.size, 0] = vector
         limits = np.array([[robot.v_max], [robot.omega_max]])
-        state0 = _initial_states(scenario, [robot], rows0)[:, 0].copy()
+        state0 = np.array([*robot.start, compensator_start(robot.name, robot.controller, v_d0)], dtype=float)
         if engine == "compiled":
             t, y = _compiled_steps(robot.controller.law, table, state0, gains, limits, duration, settings)
         else:
