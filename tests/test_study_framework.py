@@ -61,3 +61,70 @@ def test_docstring_examples():
     for module in (framework, sweep):
         failures, attempted = doctest.testmod(module)
         assert attempted > 0 and failures == 0
+
+
+# ------------------------------------------------------------------ the report page
+
+class _Result:
+    """A minimal study result for report tests."""
+
+    quick, ok = True, True
+
+    def __init__(self, name, spec_file, body):
+        self.name, self.title, self.elapsed_s, self.spec_file, self.body = name, f"Study {name}", 1.5, spec_file, body
+
+    def write_data(self, folder):
+        path = folder / f"{self.name}.json"
+        path.write_text("{}")
+        return [path]
+
+    def html_section(self, folder):
+        return self.body
+
+
+def test_report_contents_citations_and_numbers(tmp_path):
+    import re
+
+    from nonholo.studies.citations import ERRATA, SECTIONS
+    from nonholo.studies.report import html_table, write_report
+
+    leader = _Result("leader", "leader.md", '<h2 id="leader-tables">Tables</h2><p>see spec §5.3 and errata 20–21; '
+                                            "2.51e-04 m</p>" + html_table(["a", "b"], [["x", "2.51e-04"]]))
+    formation = _Result("formation", "follower-posture.md",
+                        '<h2 id="formation-figures">Figures</h2><p>(errata 15, 18, 19; spec §2.2/§3.2)</p>')
+    page = write_report([leader, formation], tmp_path).read_text(encoding="utf-8")
+    ids = set(re.findall(r'id="([^"]+)"', page))
+    links = re.findall(r'href="#([^"]+)"', page)
+    assert {"leader", "leader-tables", "formation", "formation-figures", "appendix"} <= set(links)
+    assert set(links) <= ids  # every contents entry and every citation resolves
+    for number in (20, 21):
+        assert f'href="#erratum-leader-{number}"' in page and ERRATA[("leader.md", number)][0] in page
+    for number in (15, 18, 19):
+        assert f'id="erratum-follower-posture-{number}"' in page
+    for file, key in (("leader.md", "5.3"), ("follower-posture.md", "2.2"), ("follower-posture.md", "3.2")):
+        assert SECTIONS[(file, key)][0] in page
+    assert re.search(r'<td class="num">(<span class="nb">)?2\.51e-04', page)
+    assert '<p>see spec' in page and '<span class="nb">2.51e-04</span> m</p>' in page
+    assert "td.num, .nb { white-space: nowrap" in page
+    assert page.index('id="leader"') < page.index('id="formation"') < page.index('id="appendix"')
+
+
+def test_every_citation_in_the_studies_is_explained():
+    """Every erratum and specification section that a study's text can cite has an
+    appendix entry (the citations are read from the study modules' source)."""
+    from nonholo.studies.citations import find_citations, known
+
+    missing = set()
+    for module, spec_file in (("leader", "leader.md"), ("formation", "follower-posture.md"),
+                              ("posture", "follower-posture.md")):
+        text = (STUDIES / f"{module}.py").read_text()
+        text = text[text.index('"""', text.index('"""') + 3):]  # the module docstring is not rendered
+        missing |= {c for c in find_citations(text, spec_file) if not known(c)}
+    assert missing == set()
+
+
+def test_studies_run_in_report_order():
+    from nonholo.studies.report import chosen_studies
+
+    assert [s.name for s in chosen_studies(["posture", "leader", "formation"])] == ["leader", "formation", "posture"]
+    assert [s.name for s in chosen_studies(None)][:3] == ["leader", "formation", "posture"]

@@ -573,20 +573,22 @@ def _target(result: FormationResult, follower: str, output: int) -> np.ndarray:
 def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
     """Thesis Figures 5.41–5.42: separation and bearing of the l–φ follower over time, the
     output errors against the exact e0·e^(−kt), and the Eq 5.9 change close up."""
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import plt, series_style
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, wspace=0.22, hspace=0.3)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 12))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.16, top=0.93, wspace=0.22, hspace=0.62)
     ax_l, ax_phi, ax_err, ax_zoom = axes.ravel()
-    for case in ("lphi-T1", "lphi-T4", "switch-T4"):
+    # the three runs coincide until t = 100 s: widest first, so that every line stays visible
+    for number, case in enumerate(("lphi-T1", "lphi-T4", "switch-T4")):
         run, color = study.runs[case], CASE_COLORS[case]
+        style = series_style(number)
         follower = run.formation.followers[0]
         l, phi = run.outputs(follower.name)
-        ax_l.plot(run.t, l, color=color, lw=1.4, label=CASE_TITLES[case])
-        ax_phi.plot(run.t, np.degrees(phi), color=color, lw=1.4, label=CASE_TITLES[case])
-        for output, style, unit in ((0, "-", "m"), (1, "--", "rad")):
+        ax_l.plot(run.t, l, **dict(style, color=color), label=CASE_TITLES[case])
+        ax_phi.plot(run.t, np.degrees(phi), **dict(style, color=color), label=CASE_TITLES[case])
+        for output, dashes, unit in ((0, "-", "m"), (1, (0, (5, 2)), "rad")):
             error = np.abs(run.output_errors(follower.name)[output])
-            ax_err.semilogy(run.t, np.maximum(error, 1e-16), color=color, ls=style, lw=1.2,
+            ax_err.semilogy(run.t, np.maximum(error, 1e-16), color=color, ls=dashes, lw=(2.8, 1.9, 1.1)[number],
                             label=f"{CASE_TITLES[case]}: |{SYMBOLS[follower.outputs[output]]} − "
                                   f"{SYMBOLS[follower.outputs[output]]}_d| ({unit})")
         if case == "switch-T4":
@@ -599,7 +601,8 @@ def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
             ax_zoom.plot(run.t[near], np.degrees(_target(run, follower.name, 1)[near]), "k--", lw=1.2,
                          label="φ_d (Eq 5.9)")
             ax_zoom.axhline(180.0, color="0.5", lw=0.8, ls=":")
-            ax_zoom.text(at - 1.8, 185.0, "φ = 180°: straight behind the leader", fontsize=9, color="0.3")
+            ax_zoom.text(at + 9.8, 172.0, "φ = 180°: straight behind the leader", fontsize=9, color="0.3",
+                         ha="right", va="top")
             band = 0.02 * 180.0
             final = np.degrees(THESIS_EQ_5_9["phi_after"])
             ax_zoom.axhspan(final - band, final + band, color="tab:green", alpha=0.15, label="2 % settling band")
@@ -610,23 +613,23 @@ def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
     ax_l.axhline(THESIS_EQ_5_8["l_d"], color="k", ls="--", lw=1.2, label="l_d = 2 m (Eq 5.8)")
     ax_phi.axhline(60.0, color="k", ls="--", lw=1.2, label="φ_d = 60° (Eq 5.8)")
     ax_phi.axhline(240.0, color="k", ls=":", lw=1.2, label="φ_d = 240° after t = 100 s (Eq 5.9)")
-    ax_l.set(xlabel="time t (s)", ylabel="separation l (m)", title="Separation (thesis Fig 5.41)", xlim=(0, 30))
+    ax_l.set(xlabel="time t (s)", ylabel="separation l (m)", xlim=(0, 30),
+             title="Separation (thesis Fig 5.41), first 30 s; l = l_d afterwards")
     ax_phi.set(xlabel="time t (s)", ylabel="bearing φ (degrees)", title="Bearing (thesis Fig 5.42)")
     ax_err.set(xlabel="time t (s)", ylabel="|output error| (m or rad, log scale)", ylim=(1e-16, 10),
                title="Output errors: exactly exponential, re-excited by the switch")
     ax_zoom.set(xlabel="time t (s)", ylabel="bearing φ (degrees)", title="Eq 5.9 change at t = 100 s, close up")
-    ax_l.text(0.98, 0.05, "first 30 s shown; l = l_d afterwards.\nThe three runs coincide until t = 100 s: the "
-              "closed loop\ndoes not depend on the leader's path", transform=ax_l.transAxes, ha="right", fontsize=9)
     finish_figure(fig, axes, "l–φ follower: separation and bearing (Eq 5.8, 5.9), leader on Tests 1 and 4", path)
 
 
 def finish_figure(fig, axes, title: str, path: Path) -> None:
-    """Grid and legend on every panel, the title, saved to ``path`` and closed."""
+    """Grid on every panel, each panel's legend under it (never over the data), the title;
+    saved to ``path`` and closed."""
     from nonholo.studies.plots import plt
 
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, frameon=False)
     fig.suptitle(title, fontsize=14)
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -637,8 +640,8 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
     (not controlled) beside Eq 5.10's values, and |sin(γ1 − γ2)|."""
     from nonholo.studies.plots import plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, wspace=0.22, hspace=0.3)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 11))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.93, wspace=0.22, hspace=0.55)
     ax_l, ax_sin, ax_b1, ax_b2 = axes.ravel()
     variant = next(key for key in study.runs if key.startswith("wedge-T4,"))
     for case in ("ll-T1", "ll-T4", "wedge-T4", variant):
@@ -652,11 +655,13 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
                     alpha=0.6 if case == variant else 1.0, label=CASE_TITLES.get(case, case))
         if case == variant:
             continue
+        # ll-T1 and ll-T4 coincide where the closed loop ignores the leader's path: widest first
+        width = {"ll-T1": 3.2, "ll-T4": 1.9}.get(case, 1.1)
         l1, l2 = run.outputs(follower.name)
-        ax_l.plot(run.t, l1, color=color, lw=1.4, label=f"{CASE_TITLES[case]}: l13 (to leader)")
-        ax_l.plot(run.t, l2, color=color, lw=1.4, ls="--", label=f"{CASE_TITLES[case]}: l23 (to R2)")
+        ax_l.plot(run.t, l1, color=color, lw=width, label=f"{CASE_TITLES[case]}: l13 (to leader)")
+        ax_l.plot(run.t, l2, color=color, lw=width, ls=(0, (5, 2)), label=f"{CASE_TITLES[case]}: l23 (to R2)")
         ax_sin.semilogy(run.t, np.maximum(np.abs(run.sin_gamma_difference(follower.name)), 1e-6), color=color,
-                        lw=1.2, label=CASE_TITLES[case])
+                        lw=width, label=CASE_TITLES[case])
     ax_l.axhline(THESIS_EQ_5_10["l1_d"], color="k", ls=":", lw=1.2, label="l_d = 2 m (Eq 5.10)")
     ax_sin.axhline(NEAR_SINGULAR, color="k", ls=":", lw=1.2, label=f"{NEAR_SINGULAR:g}: nearly singular")
     for ax, key in ((ax_b1, "phi_1F"), (ax_b2, "phi_2F")):
@@ -674,14 +679,23 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
 
 def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[tuple[str, str]]:
     figures = []
+    from nonholo.studies.plots import plot_formation_case
+
     for case in CASE_TITLES:
         name = f"paths-{case}.png"
-        study.runs[case].plot(folder / name)
-        figures.append((name, f"{CASE_TITLES[case]} ({THESIS_FIGURES[case]}): paths with snapshots (triangles at "
-                              f"equal time steps), output errors, speed and turn-rate demands."))
+        run = study.runs[case]
+        source = f" (thesis {THESIS_FIGURES[case]})" if THESIS_FIGURES[case].startswith("Fig") else ""
+        plot_formation_case(run, f"{CASE_TITLES[case]}{source}: {len(run.formation.robots)} robots, "
+                                 f"{run.t[-1]:.5g} s, dt = {run.formation.dt:g} s", folder / name)
+        figures.append((name, f"{CASE_TITLES[case]}{source}: paths with snapshots (triangles at "
+                              "equal time steps; grey: leader axle → follower castor point), the follower output "
+                              "errors, and each robot's applied speed v and turn rate ω (one panel each; start-up "
+                              "peaks outside a row's scale are clipped and named above the panel)."))
     plot_bearing_outputs(study, folder / "lphi-outputs.png")
     figures.insert(2, ("lphi-outputs.png", "l–φ separation and bearing over time (Fig 5.41–5.42) and the Eq 5.9 "
-                                           "change close up."))
+                                           "change close up. The three runs coincide until t = 100 s (the closed "
+                                           "loop does not depend on the leader's path): the widest line is drawn "
+                                           "first, so each stays visible."))
     plot_separation_outputs(study, folder / "ll-outputs.png")
     figures.append(("ll-outputs.png", "l–l follower: controlled distances, singularity margin, and the bearings that "
                                       "Eq 5.10 lists but the law does not control."))

@@ -47,7 +47,9 @@ def show(value) -> str:
         return "–"
     if isinstance(value, bool):
         return "yes" if value else "no"
-    if isinstance(value, (int, float, np.floating)):
+    if isinstance(value, (int, np.integer)):
+        return str(value)
+    if isinstance(value, (float, np.floating)):
         value = float(value)
         if not math.isfinite(value):
             return str(value)

@@ -40,6 +40,8 @@ TEST_TITLES = {"T1": "Test 1: figure eight", "T2": "Test 2: straight line", "T3"
                "T4": "Test 4: circle, robot starting at its centre"}
 # The path panel shows only the start of long, thin references.
 PATH_WINDOW = {"T1": None, "T2": 20.0, "T3": 25.0, "T4": None}
+# The v, ω and heading-error panels show the first seconds, where the controllers differ.
+INPUT_WINDOW = {"T1": 60.0, "T2": 20.0, "T3": 25.0, "T4": 60.0}
 CONTROLLERS = (*thesis.THESIS_CONTROLLERS, "offset-point")
 LABELS = {"approximate-linearization": "approx. lin.", "nonlinear": "nonlinear", "cascaded": "cascaded",
           "kanayama": "stable tracking", "dynamic-feedback": "dynamic FL", "offset-point": "offset point"}
@@ -226,11 +228,14 @@ class LeaderStudyResult(StudyResult):
         return rows
 
     def table_header(self) -> list[str]:
-        header = ["controller", "mean", "std", "var", "e(T)", "rank", "thesis mean", "thesis std", "thesis var",
-                  "thesis rank", "mean/thesis"]
+        header = ["controller", "mean", "std", "var", "e(T)", "rank", "mean", "std", "var", "rank", "ours/ thesis"]
         if self.has_solver:
-            header += ["solver-step mean", "solver-step std", "solver rank", "solver mean/thesis"]
+            header += ["mean", "std", "rank", "mean/ thesis"]
         return header
+
+    def table_groups(self) -> list[tuple[str, int]]:
+        groups = [("", 1), ("ours, uniform grid", 5), ("thesis", 4), ("mean", 1)]
+        return groups + ([("ours, over solver steps", 4)] if self.has_solver else [])
 
     def table_caption(self, test: str) -> str:
         steps = self.runs[test].scenario.n_steps
@@ -281,26 +286,35 @@ class LeaderStudyResult(StudyResult):
                  e.trend.word, e.claim_text, "yes" if e.agrees else "no"] for e in self.effects]
 
     def html_section(self, folder: Path) -> str:
-        from nonholo.studies.plots import plot_comparison, plot_sweep_panels, plot_test
+        from nonholo.studies.plots import plot_comparison, plot_sweep_panels, plot_test, plot_test_inputs
 
-        parts = [f"<p>{escape(_setup_text(self))}</p>", "<h2>Differences from the thesis</h2>",
-                 html_list(f.html() for f in self.findings), "<h2>Tables 5.2–5.5, ours beside the thesis</h2>"]
+        parts = [f"<p>{escape(_setup_text(self))}</p>", '<h2 id="leader-differences">Differences from the thesis</h2>',
+                 html_list(f.html() for f in self.findings),
+                 '<h2 id="leader-tables">Tables 5.2–5.5, ours beside the thesis</h2>']
         series = {"ours (uniform grid)": self._means("uniform")}
         if self.has_solver:
             series["ours (solver steps)"] = self._means("solver")
         series["thesis"] = self._means("thesis")
+        for test in EXAMPLES:
+            parts.append(html_table(self.table_header(), self.table_rows(test), self.table_caption(test),
+                                    self.table_groups()))
         plot_comparison(list(EXAMPLES), CONTROLLERS, LABELS, series, folder / "comparison.png")
-        parts.append(html_figure(f"{folder.name}/comparison.png", "Mean error per test and controller "
+        parts.append(html_figure(f"{folder.name}/comparison.png", "Mean error per test and controller, log scale "
                                  "(offset point has no thesis value)."))
         for test in EXAMPLES:
-            parts.append(html_table(self.table_header(), self.table_rows(test), self.table_caption(test)))
-        parts.append("<h2>Per test: paths, error norm, v_d and ω_d (Figures 5.5–5.24)</h2>")
-        for test in EXAMPLES:
+            parts.append(f'<h2 id="leader-{test.lower()}">{escape(TEST_TITLES[test])}</h2>')
             name = f"{test.lower()}.png"
             plot_test(self.runs[test], TEST_TITLES[test], LABELS, folder / name, PATH_WINDOW[test])
-            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: every controller from the "
-                                     "origin with θ(0) = 0 (errors below 1e-7 m drawn at 1e-7 m)."))
-        parts.append("<h2>Table 5.6: gain sweeps on Test 1 (Figures 5.25–5.38)</h2>")
+            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]} (thesis Figures 5.5–5.24): "
+                                     "every controller from the origin with θ(0) = 0. Where two controllers' lines "
+                                     "coincide, the thinner one is drawn inside the wider one."))
+            name = f"{test.lower()}-inputs.png"
+            plot_test_inputs(self.runs[test], TEST_TITLES[test], LABELS, folder / name, INPUT_WINDOW[test])
+            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: the applied driving speed v and "
+                                     "turn rate ω of each controller beside the reference's v_d and ω_d (dashed), and "
+                                     "its heading error e3 = θ_d − θ wrapped to (−180°, 180°]. Each row shares its "
+                                     "scale; a start-up peak outside it is clipped and named above its panel."))
+        parts.append('<h2 id="leader-sweeps">Table 5.6: gain sweeps on Test 1 (Figures 5.25–5.38)</h2>')
         parts.append(html_table(["controller", "gain", "range", "ours", "thesis", "agrees"], self.effect_rows(),
                                 "Effect of increasing the gain on the mean error (others at Table 5.1 values)"))
         parts.append(f"<p class=\"note\">{escape(_trend_rule())}</p>")

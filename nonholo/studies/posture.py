@@ -231,10 +231,11 @@ class PostureStudyResult(TabulatedStudyResult):
                    Column("peak |v| (m/s)", "peak_v", terminal=False), Column("peak |ω| (rad/s)", "peak_omega", terminal=False)]
         return [
             Table("runs", "Thesis runs from (−10, −10), heading 0, to each goal with heading 0, beside the thesis's "
-                  "statements (§5.8; it prints no numbers)",
-                  [*columns[:2], Column("thesis figure", "figure", terminal=False), *columns[2:],
-                   Column("heading controlled", "heading_controlled", terminal=False),
-                   Column("thesis (§5.8)", "thesis")], main),
+                  "statements (§5.8; it prints no numbers); distance and heading error at the end",
+                  [columns[0], Column("thesis (§5.8)", "thesis"), Column("distance (m)", "distance"),
+                   Column("heading error", "heading_deg", lambda v: f"{v:.3g}°"), columns[1],
+                   Column("thesis figure", "figure", terminal=False), *columns[2:3], *columns[4:5], *columns[6:],
+                   Column("heading controlled", "heading_controlled", terminal=False)], main),
             Table("variants", "Variants that explain §5.8 (spec §5.2 (a)/(b), §5.3, §5.1)", columns, variants),
             Table("spec", "Our numbers beside the spec's reference numbers (follower-posture.md §6 (d))",
                   COMPARISON_COLUMNS, [c.record() for c in self.comparisons], terminal=False),
@@ -254,9 +255,13 @@ class PostureStudyResult(TabulatedStudyResult):
 
     def write_figures(self, folder: Path) -> list[tuple[str, str]]:
         plot_posture_runs(self, folder / "posture-runs.png")
+        plot_posture_inputs(self, folder / "posture-inputs.png")
         plot_polar_variants(self, folder / "polar-variants.png")
         return [("posture-runs.png", "The three laws to both goals (Figures 5.46–5.51): paths, distance to the goal "
                                      "and heading over time."),
+                ("posture-inputs.png", "What each law applies: driving speed v and turn rate ω to both goals; "
+                                       "start-up peaks outside a column's scale (the dynamic-feedback law's first "
+                                       "turn from rest) are clipped and named above the panel."),
                 ("polar-variants.png", "Thesis §5.8's polar “failure” for goal (−10, 10): the correct law, the goal not "
                                        "translated, and the distance measured from the world origin.")]
 
@@ -369,10 +374,10 @@ LAW_COLORS = {"time-varying": "tab:blue", "polar": "tab:orange", "dynamic-feedba
 
 def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
     """Figures 5.46–5.51 in one: paths to each goal, distance to the goal, heading."""
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import legend_below, plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 10))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.06, top=0.92, wspace=0.2, hspace=0.28)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 11))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.92, wspace=0.2, hspace=0.42)
     ax_origin, ax_other, ax_distance, ax_heading = axes.ravel()
     for ax, goal in ((ax_origin, "origin"), (ax_other, "(-10, 10)")):
         for law in LAWS:
@@ -384,15 +389,15 @@ def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
         ax.plot(*pose[:2], "r*", ms=16, label=f"goal ({pose[0]:g}, {pose[1]:g}), heading 0")
         ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Paths to the goal ({pose[0]:g}, {pose[1]:g})")
         ax.set_aspect("equal", adjustable="datalim")
-        ax.legend(fontsize=8, loc="lower right")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.1), ncol=2, frameon=False)
     for law in LAWS:
-        for goal, style in (("origin", "-"), ("(-10, 10)", "--")):
+        for goal, style in (("origin", "-"), ("(-10, 10)", (0, (5, 2)))):
             run = result.runs[case_key(law, goal)]
             distance = np.maximum(goal_distance(run, GOALS[goal]), 1e-12)
-            ax_distance.semilogy(run.t, distance, color=LAW_COLORS[law], ls=style, lw=1.3,
+            ax_distance.semilogy(run.t, distance, color=LAW_COLORS[law], ls=style, lw=2.2 if goal == "origin" else 1.3,
                                  label=f"{LABELS[law]}, goal {goal}")
             ax_heading.plot(run.t, np.degrees(wrap(run.trajectory("theta")[0])), color=LAW_COLORS[law], ls=style,
-                            lw=1.3, label=f"{LABELS[law]}, goal {goal}")
+                            lw=2.2 if goal == "origin" else 1.3, label=f"{LABELS[law]}, goal {goal}")
     ax_distance.set(xlabel="time t (s)", ylabel="distance to the goal (m, log scale; floor 1e-12)",
                     title="Distance to the goal", ylim=(1e-12, 50))
     ax_heading.axhline(0.0, color="k", lw=0.8)
@@ -400,23 +405,54 @@ def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
                    ylim=(-190, 190), yticks=range(-180, 181, 60))
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-    ax_distance.legend(fontsize=8, loc="center right")
-    ax_heading.legend(fontsize=8, loc="best")
+    legend_below(fig, ax_distance, ncol=6, fontsize=8.5)
     fig.suptitle("Posture stabilization from (−10, −10): time-varying, polar and dynamic FL laws (60 s)", fontsize=14)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
+def plot_posture_inputs(result: PostureStudyResult, path: Path) -> None:
+    """Small multiples, one row per law: the applied v and ω to each goal (solid: (0, 0),
+    dashed: (−10, 10)); start-up spikes are clipped and named above the panel."""
+    from nonholo.studies.plots import legend_below, peak_note, plt, robust_range
+
+    fig, axes = plt.subplots(len(LAWS), 2, figsize=(13, 9.5), sharex=True, sharey="col", squeeze=False)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.9, wspace=0.15, hspace=0.55)
+    for c, (field, unit, kind) in enumerate((("v", "m/s", "applied v"), ("omega", "rad/s", "applied ω"))):
+        series = {(law, goal): result.runs[case_key(law, goal)].trajectory(field)[0] for law in LAWS for goal in GOALS}
+        low, high = robust_range(list(series.values()))
+        for r, law in enumerate(LAWS):
+            ax = axes[r, c]
+            notes = []
+            for goal, style in (("origin", "-"), ("(-10, 10)", (0, (5, 2)))):
+                run = result.runs[case_key(law, goal)]
+                ax.plot(run.t, series[(law, goal)], color=LAW_COLORS[law], ls=style, lw=2.2 if goal == "origin" else 1.2,
+                        label=f"goal {goal}")
+                note = peak_note(run.t, series[(law, goal)], low, high, unit)
+                if note:
+                    notes.append(f"goal {goal}: {note}")
+            ax.set_title(f"{LABELS[law]}: {kind} ({unit})" + "".join(f"\n{n}" for n in notes), fontsize=9,
+                         color="#a31515" if notes else "black")
+            ax.grid(True, alpha=0.3)
+        axes[0, c].set_ylim(low, high)
+        axes[-1, c].set_xlabel("time t (s)")
+    legend_below(fig, axes[0, 0], ncol=2)
+    fig.suptitle("Posture stabilization: what each law applies (solid: goal (0, 0); dashed: goal (−10, 10))",
+                 fontsize=13)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import legend_below, plt
 
     goal = GOALS["(-10, 10)"]
     runs = {"correct (goal frame)": result.runs[case_key("polar", "(-10, 10)")],
             "goal not translated (parks at the origin)": result.runs[case_key("polar", "origin")],
             "distance from the world origin": result.runs["polar, distance from the world origin"]}
     colors = ("tab:orange", "tab:gray", "tab:purple")
-    fig, (ax_path, ax_distance) = plt.subplots(1, 2, figsize=(13, 5.5))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.11, top=0.86, wspace=0.22)
+    fig, (ax_path, ax_distance) = plt.subplots(1, 2, figsize=(13, 6))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.2, top=0.86, wspace=0.22)
     for (label, run), color in zip(runs.items(), colors):
         ax_path.plot(run.trajectory("x")[0], run.trajectory("y")[0], color=color, lw=1.6, label=label)
         ax_distance.semilogy(run.t, np.maximum(goal_distance(run, goal), 1e-12), color=color, lw=1.4, label=label)
@@ -426,9 +462,9 @@ def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
     ax_path.set_aspect("equal", adjustable="datalim")
     ax_distance.set(xlabel="time t (s)", ylabel="distance to (−10, 10) (m, log scale)", ylim=(1e-12, 50),
                     title="Distance to the goal (−10, 10)")
-    for ax, where in ((ax_path, "upper right"), (ax_distance, "center right")):
+    for ax in (ax_path, ax_distance):
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=9, loc=where)
+    legend_below(fig, ax_path, ncol=5, fontsize=9)
     fig.suptitle("Polar law, goal (−10, 10): the thesis's “does not converge” needs an implementation error",
                  fontsize=13)
     fig.savefig(path, dpi=100)

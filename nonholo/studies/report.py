@@ -20,19 +20,20 @@ from nonholo.studies.progress import Progress
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 0; color: #222; line-height: 1.45; }
-nav#toc { position: fixed; top: 0; left: 0; bottom: 0; width: 16rem; overflow-y: auto; box-sizing: border-box;
+nav#toc { position: fixed; top: 0; left: 0; bottom: 0; width: 14.5rem; overflow-y: auto; box-sizing: border-box;
           padding: 1rem 0.8rem; background: #f5f6f7; border-right: 1px solid #d8d8d8; font-size: 0.88em; }
 nav#toc h2 { font-size: 1.05em; margin: 0 0 0.5em; }
 nav#toc ol { padding-left: 1.2em; margin: 0.2em 0; } nav#toc li { margin: 0.15em 0; }
 nav#toc ol ol { font-size: 0.95em; list-style: lower-alpha; }
-main { margin-left: 17.5rem; max-width: 1150px; padding: 0.5rem 1.5rem 4rem; }
+main { margin-left: 14.5rem; max-width: 1200px; padding: 0.5rem 1.2rem 4rem; }
 @media (max-width: 1000px) { nav#toc { position: static; width: auto; border: 0; } main { margin-left: 0; } }
 h1 { font-size: 1.6em; border-bottom: 2px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
 h2 { font-size: 1.25em; margin-top: 1.4em; } h1, h2, h3, dt, tr { scroll-margin-top: 0.5em; }
 .scroll { overflow-x: auto; margin: 0.6em 0 1.4em; }
-table { border-collapse: collapse; font-size: 0.86em; }
-th, td { border: 1px solid #bbb; padding: 0.25em 0.55em; text-align: right; vertical-align: top; }
+table { border-collapse: collapse; font-size: 0.82em; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.42em; text-align: right; vertical-align: top; }
 th { background: #eee; } td:first-child, th:first-child { text-align: left; } td.text { text-align: left; }
+th.group { text-align: center; background: #e2e6ea; } td:first-child { white-space: nowrap; }
 td.num, .nb { white-space: nowrap; font-variant-numeric: tabular-nums; }
 caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3em; max-width: 60em; }
 figure { margin: 1em 0 1.6em; } figure img { max-width: 100%; border: 1px solid #ddd; }
@@ -42,7 +43,7 @@ li { margin: 0.35em 0; }
 .partly { color: #8a5a00; font-weight: 600; } .note { color: #555; font-size: 0.92em; }
 a.cite { text-decoration: none; border-bottom: 1px dotted #36c; }
 dl.cites dt { font-weight: 600; margin-top: 0.6em; } dl.cites dd { margin-left: 1.2em; max-width: 60em; }
-table.errata td { text-align: left; } table.errata td.num { text-align: right; }
+table.errata td, table.errata th { text-align: left; } table.errata td.num { text-align: right; }
 """
 
 # A cell that is a number (with optional sign, exponent, unit or ratio) is kept on one line.
@@ -60,14 +61,21 @@ def numeric(text: str) -> bool:
     return bool(_NUMERIC.match(text.strip()))
 
 
-def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "") -> str:
+def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "",
+               groups: Sequence[tuple[str, int]] | None = None) -> str:
     """A table; cells are escaped text (numbers formatted by the caller; numeric cells get
-    ``class="num"``: never broken across lines). Wide tables scroll sideways."""
+    ``class="num"``: never broken across lines). ``groups``: (label, columns spanned) of an
+    extra header row above ``header``. Wide tables scroll sideways."""
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
+    if groups:
+        top = "".join(f'<th colspan="{span}" class="group">{escape(label)}</th>' for label, span in groups)
+        head = f"<tr>{top}</tr><tr>{head}</tr>"
+    else:
+        head = f"<tr>{head}</tr>"
     body = "\n".join("<tr>" + "".join(f'<td class="{"num" if numeric(str(c)) else "text"}">{escape(c)}</td>'
                                       for c in row) + "</tr>" for row in rows)
     cap = f"<caption>{escape(caption)}</caption>" if caption else ""
-    return f'<div class="scroll"><table>{cap}<thead><tr>{head}</tr></thead><tbody>\n{body}\n</tbody></table></div>'
+    return f'<div class="scroll"><table>{cap}<thead>{head}</thead><tbody>\n{body}\n</tbody></table></div>'
 
 
 def html_figure(src: str, caption: str) -> str:
