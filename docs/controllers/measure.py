@@ -152,7 +152,7 @@ def measure_posture(law: str) -> dict:
                          "peak |ω| (rad/s)": float(np.abs(result.trajectory("omega")[0]).max())})
     first = "max distance, last 10 s (m)" if law == "time-varying" else f"within {NEAR:g} m after (s)"
     return {"rows": rows, "panels": (first, "peak |ω| (rad/s)"),
-            "setup": "from (−10, −10), heading 0, to the goal (0, 0) with heading 0, 60 s, dt = 0.01 s"}
+            "setup": "a run from (−10, −10), heading 0, to the goal (0, 0) with heading 0, 60 s, dt = 0.01 s"}
 
 
 # ------------------------------------------------------------------ the index's comparison
