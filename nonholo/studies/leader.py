@@ -312,7 +312,7 @@ class LeaderStudyResult(StudyResult):
             plot_test_inputs(self.runs[test], TEST_TITLES[test], LABELS, folder / name, INPUT_WINDOW[test])
             parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: the applied driving speed v and "
                                      "turn rate ω of each controller beside the reference's v_d and ω_d (dashed), and "
-                                     "its heading error e3 = θ_d − θ wrapped to (−180°, 180°]. Each row shares its "
+                                     "its heading error e3 = θ_d − θ wrapped to (−180°, 180°]. Each column shares its "
                                      "scale; a start-up peak outside it is clipped and named above its panel."))
         parts.append('<h2 id="leader-sweeps">Table 5.6: gain sweeps on Test 1 (Figures 5.25–5.38)</h2>')
         parts.append(html_table(["controller", "gain", "range", "ours", "thesis", "agrees"], self.effect_rows(),
