@@ -27,11 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nonholo import examples
+from nonholo import examples, load_scenario
 from nonholo.formation import (Follower, Formation, FormationResult, link_state, separation_bearing,
                                simulate_formation)
 from nonholo.formation.schedule import target_segments
-from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
                                        TabulatedStudyResult, Table, degrees, show)

@@ -21,11 +21,10 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from nonholo import examples
+from nonholo import examples, load_scenario
 from nonholo.control.posture import POSTURE_CONTROLLERS, goal_frame_pose, polar_command
 from nonholo.formation import Formation, FormationResult, simulate_formation
 from nonholo.formation.geometry import wrap
-from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions
 from nonholo.studies.formation import QUICK_DT
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,

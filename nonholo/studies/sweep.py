@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nonholo import Robot, Scenario, simulate
 from nonholo.errors import NonholoInputError
-from nonholo.sim.scenario import Robot, Scenario
-from nonholo.sim.simulator import simulate
 
 METRICS = ("mean", "rms", "max", "final")
 
