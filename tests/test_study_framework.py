@@ -128,3 +128,26 @@ def test_studies_run_in_report_order():
 
     assert [s.name for s in chosen_studies(["posture", "leader", "formation"])] == ["leader", "formation", "posture"]
     assert [s.name for s in chosen_studies(None)][:3] == ["leader", "formation", "posture"]
+
+
+def test_progress_logs_when_not_a_terminal(monkeypatch):
+    import io
+    import time
+
+    from nonholo.studies import progress as progress_module
+    from nonholo.studies.progress import Progress, mode_for
+
+    stream = io.StringIO()
+    assert mode_for(True, stream) == "log" and mode_for(False, stream) == "off"
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    with Progress("study demo", 2, "log", stream=stream, heartbeat=0.5) as progress:
+        progress.start("first")
+        time.sleep(1.3)  # a long step: heartbeat lines while it runs
+        progress.done()
+        progress.start("second")
+        progress.done()
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "study demo: started, 2 steps"
+    assert any("running: first" in line for line in lines)
+    assert lines[-1].startswith("study demo: 2/2 steps, ") and lines[-1].endswith("(done: second)")
+    assert all(len(line) <= 100 for line in lines)
