@@ -34,6 +34,21 @@ def mode_for(enabled: bool, stream=None) -> str:
     return "bar" if getattr(stream, "isatty", lambda: False)() else "log"
 
 
+def _describe(function) -> str:
+    """A compiled function's name, with the control law it was built for if it is a closure
+    over one (the simulator's kernels are: "integrate for kanayama_law")."""
+    name = getattr(function, "__name__", "compiled code")
+    for cell in getattr(function, "__closure__", None) or ():
+        try:
+            inner = cell.cell_contents
+        except ValueError:  # an empty cell
+            continue
+        inner_name = getattr(getattr(inner, "py_func", inner), "__name__", "")
+        if inner_name.endswith("_law"):
+            return f"{name} for {inner_name}"
+    return name
+
+
 class _Compiling:
     """What numba is compiling right now (its ``numba:compile`` event fires on cache misses
     only), shared by every Progress of the process."""
@@ -59,8 +74,7 @@ class _Compiling:
             class Listener(event.Listener):
                 def on_start(self, ev):
                     dispatcher = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
-                    function = getattr(dispatcher, "py_func", None)
-                    owner.names.append(getattr(function, "__name__", "compiled code"))
+                    owner.names.append(_describe(getattr(dispatcher, "py_func", None)))
                     owner.count += 1
 
                 def on_end(self, ev):
