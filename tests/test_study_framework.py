@@ -141,7 +141,7 @@ def test_progress_logs_when_not_a_terminal(monkeypatch):
     assert mode_for(True, stream) == "log" and mode_for(False, stream) == "off"
     monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
     with Progress("study demo", 2, "log", stream=stream, heartbeat=0.5) as progress:
-        progress.start("first")
+        progress.start("first " + "very long step name " * 8)
         time.sleep(1.3)  # a long step: heartbeat lines while it runs
         progress.done()
         progress.start("second")
@@ -150,4 +150,4 @@ def test_progress_logs_when_not_a_terminal(monkeypatch):
     assert lines[0] == "study demo: started, 2 steps"
     assert any("running: first" in line for line in lines)
     assert lines[-1].startswith("study demo: 2/2 steps, ") and lines[-1].endswith("(done: second)")
-    assert all(len(line) <= 100 for line in lines)
+    assert all(len(line.encode()) <= 100 for line in lines)

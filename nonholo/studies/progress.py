@@ -24,6 +24,7 @@ import time
 HEARTBEAT_S = 20.0  # log mode: a line at least this often while a step runs
 LOG_EVERY_S = 2.0  # log mode: a finished step is logged if this long has passed since the last line
 MODES = ("bar", "log", "off")
+LINE_WIDTH = 100  # log lines are cut to this many columns (UTF-8 bytes, as the study summaries)
 
 
 def mode_for(enabled: bool, stream=None) -> str:
@@ -192,7 +193,11 @@ class Progress:
     def _line(self, note: str | None) -> None:
         self._last_line = time.perf_counter()
         text = f"{self.label}: {self.count}/{self.total} {self.unit}, {self.elapsed:.1f} s"
-        print(text + (f" ({note})" if note else ""), file=self.stream, flush=True)
+        if note:
+            while len(f"{text} ({note})".encode()) > LINE_WIDTH and len(note) > 1:
+                note = note[:-2] + "…"
+            text += f" ({note})"
+        print(text, file=self.stream, flush=True)
 
     def _tick(self) -> None:
         while not self._stop.wait(1.0):
