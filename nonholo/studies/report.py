@@ -34,7 +34,7 @@ table { border-collapse: collapse; font-size: 0.82em; }
 th, td { border: 1px solid #bbb; padding: 0.2em 0.42em; text-align: right; vertical-align: top; }
 th { background: #eee; } td:first-child, th:first-child { text-align: left; } td.text { text-align: left; }
 th.group { text-align: center; background: #e2e6ea; } td:first-child { white-space: nowrap; }
-td.num, .nb { white-space: nowrap; font-variant-numeric: tabular-nums; }
+td.num, .nb { white-space: nowrap; font-variant-numeric: tabular-nums; } td.nw { white-space: nowrap; }
 caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3em; max-width: 60em; }
 figure { margin: 1em 0 1.6em; } figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #444; max-width: 60em; }
@@ -49,6 +49,7 @@ table.errata td, table.errata th { text-align: left; } table.errata td.num { tex
 # A cell that is a number (with optional sign, exponent, unit or ratio) is kept on one line.
 _NUMERIC = re.compile(r"^[−–+-]?(\d[\d.,]*(e[−+-]?\d+)?|inf|nan)\s?(%|°|×|s|m|m/s|rad/s)?$|^[–-]$|^\d+/\d+$",
                       re.IGNORECASE)
+SHORT_CELL = 16  # characters: shorter text cells are never wrapped
 _SCIENTIFIC = re.compile(r"(?<![\w.])([−-]?\d+(?:\.\d+)?(?:e|×10\^?)[−+-]?\d+)")
 
 
@@ -59,6 +60,14 @@ def escape(value) -> str:
 def numeric(text: str) -> bool:
     """Whether a table cell's text is a number (kept on one line in the report)."""
     return bool(_NUMERIC.match(text.strip()))
+
+
+def cell_class(text: str) -> str:
+    """"num" for a number (right-aligned, one line), "text nw" for a short text such as a
+    point "(−10, 10)" (kept on one line), "text" otherwise."""
+    if numeric(text):
+        return "num"
+    return "text nw" if len(text) <= SHORT_CELL else "text"
 
 
 def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "",
@@ -72,8 +81,8 @@ def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "
         head = f"<tr>{top}</tr><tr>{head}</tr>"
     else:
         head = f"<tr>{head}</tr>"
-    body = "\n".join("<tr>" + "".join(f'<td class="{"num" if numeric(str(c)) else "text"}">{escape(c)}</td>'
-                                      for c in row) + "</tr>" for row in rows)
+    body = "\n".join("<tr>" + "".join(f'<td class="{cell_class(str(c))}">{escape(c)}</td>' for c in row) + "</tr>"
+                     for row in rows)
     cap = f"<caption>{escape(caption)}</caption>" if caption else ""
     return f'<div class="scroll"><table>{cap}<thead>{head}</thead><tbody>\n{body}\n</tbody></table></div>'
 
