@@ -8,6 +8,10 @@
 """
 __version__ = "0.1.0"
 
+from nonholo import numba_cache  # noqa: E402  (first: before any module compiles)
+
+numba_cache.install()
+
 from nonholo import references  # noqa: E402
 from nonholo.control.registry import CONTROLLERS, controller  # noqa: E402
 from nonholo.errors import (ExpressionError, FormationError, InfeasibleReferenceError,  # noqa: E402

@@ -16,7 +16,8 @@ def test_study_all_runs_every_registered_study(tmp_path, capsys, monkeypatch):
     import nonholo.studies.report as report
 
     calls = []
-    monkeypatch.setattr(report, "write_report", lambda results, out: calls.append(results) or out / "index.html")
+    monkeypatch.setattr(report, "write_report",
+                        lambda results, out, options=None: calls.append(results) or out / "index.html")
     from nonholo.studies import base
 
     fake = base.Study("fake", "Fake", "for the test", lambda options: FakeResult())

@@ -204,11 +204,11 @@ def test_literal_excitation_overflows():
 def test_report_files_are_valid(quick_report):
     results, page = quick_report
     parser = ReportPage(page.read_text(encoding="utf-8"))
-    assert parser.sections == ["formation", "posture"]
-    assert "".join(parser.text).count("Differences from the thesis") == 2
+    assert parser.sections == ["formation", "posture", "appendix"]
+    assert "".join(parser.text).count("Differences from the thesis") == 2 * 2  # headings and contents entries
     pngs = [src for src in parser.images if src.endswith(".png")]
     gifs = [src for src in parser.images if src.endswith(".gif")]
-    assert len(pngs) == 8 + 2 and gifs == ["formation/switch.gif"]
+    assert len(pngs) == 8 + 3 and gifs == ["formation/switch.gif"]
     for src in pngs:
         png = (page.parent / src).read_bytes()
         assert png[:8] == b"\x89PNG\r\n\x1a\n"
@@ -235,7 +235,13 @@ def test_report_files_are_valid(quick_report):
 def test_text_shows_ours_beside_thesis_and_spec(quick_report):
     results, _ = quick_report
     text = results["formation"].text()
-    assert "3π/2 = (240°)" in text and "QUICK MODE" in text and "0.003979" in text
+    assert "3π/2 = (240°)" in text and "QUICK MODE" in text and "formation-spec.csv" in text
+    assert max(len(line.encode()) for line in text.splitlines()) <= 100
+    spec = {t.key: t for t in results["formation"].tables()}["spec"]
+    assert "0.003979" in spec.html() and not spec.terminal  # the long comparison table: report and CSV only
     text = results["posture"].text()
-    assert "near the goal, does not converge" in text and "14.14 m" in text and "Fig 5.51" in text
+    assert "near the goal, does not converge" in text and "posture-spec.csv" in text
+    assert max(len(line.encode()) for line in text.splitlines()) <= 100
+    tables = {t.key: t for t in results["posture"].tables()}
+    assert "14.14 m" in tables["spec"].html() and "Fig 5.51" in tables["runs"].html()
     assert np.isfinite([r["distance"] for r in results["posture"].records.values()]).all()

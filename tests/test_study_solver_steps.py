@@ -7,7 +7,7 @@ import pytest
 
 from nonholo import examples
 from nonholo.sim.files import load_scenario
-from nonholo.sim.solver_steps import solver_step_statistics
+from nonholo.studies.solver_steps import solver_step_statistics
 
 
 @pytest.fixture(scope="module")

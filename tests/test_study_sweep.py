@@ -83,3 +83,22 @@ def test_plots_and_files(tmp_path):
         sweep.write_csv(tmp_path / f"{name}.csv")
         assert len((tmp_path / f"{name}.csv").read_text().splitlines()) == sweep.points + 1
     assert "trend" in line.to_dict() and "trend" not in heat.to_dict()
+
+
+def test_best_point_on_the_grid_edge_is_reported():
+    import numpy as np
+
+    from nonholo.studies.sweep import GainAxis, SweepResult
+
+    def result(values, *axes):
+        values = np.asarray(values, dtype=float)
+        errors = {s: values for s in ("mean", "std", "rms", "max", "final")}
+        return SweepResult("s", "r", "kanayama", axes, "mean", errors, 0.1)
+
+    inside = result([3.0, 1.0, 2.0], GainAxis.linear("kx", 1, 3, 3))
+    assert inside.best() == {"kx": 2.0} and inside.best_on_edge() == [] and inside.edge_warning() is None
+    low = result([1.0, 2.0, 3.0], GainAxis.linear("kx", 1, 3, 3))
+    assert low.best_on_edge() == ["kx"] and "kx = 1, the lowest value swept" in low.edge_warning()
+    assert low.to_dict()["best"] == {"point": {"kx": 1.0}, "value": 1.0, "on_edge": ["kx"]}
+    corner = result([[5.0, 4.0], [3.0, 9.0], [6.0, 7.0]], GainAxis.linear("a", 0, 2, 3), GainAxis.linear("b", 0, 1, 2))
+    assert corner.best() == {"a": 1.0, "b": 0.0} and corner.best_on_edge() == ["b"]

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import time
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
@@ -19,7 +21,8 @@ def register(subparsers) -> None:
     parser.add_argument("names", nargs="*", metavar="STUDY", help="studies to run (default: all)")
     parser.add_argument("--out", metavar="DIR", default="study-report", help="report folder (default: %(default)s)")
     parser.add_argument("--quick", action="store_true", help="coarser grids and shorter sweeps (a smoke test)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars and no tables on stdout")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress (bar on a terminal, one-line logs on stderr otherwise) and no tables")
     parser.add_argument("--sampling", choices=("uniform", "solver-steps", "both"), default="both",
                         help="statistics over the uniform grid, the solver's accepted steps, or both (default)")
     parser.set_defaults(handler=handle)
@@ -27,21 +30,49 @@ def register(subparsers) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from nonholo.errors import NonholoInputError
-    from nonholo.studies import StudyOptions, run_studies
+    from nonholo.studies import StudyOptions
+    from nonholo.studies.report import chosen_studies, run_each, write_report
+
+    def finished(result) -> None:
+        """Print a study's summary as soon as it finishes."""
+        if not args.quiet:
+            print(result.text())
+            print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
+                  flush=True)
 
     try:
-        options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet and sys.stderr.isatty(),
-                               sampling=args.sampling)
-        results, page = run_studies(args.names, options)
+        options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet, sampling=args.sampling)
+        chosen_studies(args.names)  # unknown names fail before any work
+        results = run_each(args.names, options, finished)
+        started = time.perf_counter()
+        page = write_report(results, options.out_dir, options)
+        report_s = time.perf_counter() - started
     except NonholoInputError as exc:
         print(f"nonholo study: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (RuntimeError, OSError) as exc:
         print(f"nonholo study: failed: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    if not args.quiet:
-        for result in results:
-            print(result.text())
-            print()
-    print(f"report: {page}" + ("" if args.quiet else f" ({sum(r.elapsed_s for r in results):.1f} s)"))
+    if args.quiet:
+        print(f"report: {page}")
+    else:
+        print(f"report: {page} (figures and data files: {report_s:.1f} s)")
+        print(f"wall time: {command_wall_time():.1f} s in all; studies "
+              + ", ".join(f"{r.name} {r.elapsed_s:.1f} s" for r in results) + f", report {report_s:.1f} s")
     return EXIT_OK if all(r.ok for r in results) else EXIT_FAILURE
+
+
+_STARTED = time.perf_counter()
+
+
+def command_wall_time() -> float:
+    """Seconds since this process started (Linux: from /proc; elsewhere since this module
+    was imported, i.e. after Python's start-up)."""
+    try:
+        with open("/proc/self/stat") as handle:
+            start_ticks = int(handle.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as handle:
+            uptime = float(handle.read().split()[0])
+        return uptime - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return time.perf_counter() - _STARTED

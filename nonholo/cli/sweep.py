@@ -41,6 +41,12 @@ def handle(args: argparse.Namespace) -> int:
         if args.steps is not None and args.steps < 1:
             raise NonholoInputError(f"--steps must be a positive integer, got {args.steps}")
         scenario = load_scenario(examples.resolve(args.scenario))
+        if not args.quiet and not sys.stderr.isatty():  # a terminal gets the simulator's progress bar instead
+            points = 1
+            for axis in axes:
+                points *= axis.values.size
+            print(f"nonholo sweep: simulating {points} grid points of {args.scenario} as one batch …", file=sys.stderr,
+                  flush=True)
         result = run_sweep(scenario, axes, robot=args.robot, metric=args.metric,
                            steps=args.steps, progress=False if args.quiet else None)
     except NonholoInputError as exc:
@@ -62,18 +68,26 @@ def handle(args: argparse.Namespace) -> int:
     if args.json:
         json.dump(result.to_dict(), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
+        if result.edge_warning() and not args.quiet:
+            print(f"nonholo sweep: {result.edge_warning()}", file=sys.stderr)
     else:
         print(describe(result))
     return EXIT_OK
 
 
 def describe(result) -> str:
-    """A short text summary: the best point and, for one gain, the trend and every value."""
+    """A short text summary (lines of at most 100 columns): the best point, a warning if it
+    lies on the grid's edge and, for one gain, the trend and every value."""
+    from nonholo.studies.framework import wrap
+
     values = result.values
-    best = tuple(int(i) for i in __import__("numpy").unravel_index(values.argmin(), values.shape))
-    where = ", ".join(f"{a.name} = {a.values[i]:g}" for a, i in zip(result.axes, best))
-    lines = [f"{result.scenario}, robot {result.robot} ({result.controller}): {result.points} points in "
-             f"{result.elapsed_s:.2f} s; lowest {result.metric} error {values.min():.4g} m at {where}"]
+    where = ", ".join(f"{name} = {value:g}" for name, value in result.best().items())
+    lines = [wrap(f"{result.scenario}, robot {result.robot} ({result.controller}): {result.points} points simulated "
+                  f"in {result.elapsed_s:.2f} s (one batch, wall time); lowest {result.metric} error {values.min():.4g} m "
+                  f"at {where}", 100)]
+    warning = result.edge_warning()
+    if warning:
+        lines.append(wrap(warning, 100))
     if len(result.axes) == 1:
         axis = result.axes[0]
         lines.append(f"trend of the {result.metric} error as {axis.name} increases: {result.trend().word}")

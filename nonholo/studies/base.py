@@ -6,7 +6,8 @@ discovered by ``discover()``, the way ``nonholo.cli`` discovers commands, so add
 (``formation.py``, ``posture.py``…) never edits this package's other files.
 
 ``Study.run(options) -> StudyResult``. A ``StudyResult`` carries its data and knows how to
-present itself: ``text()`` for the terminal, ``html_section(folder)`` for the report
+present itself: ``text()`` for the terminal (at most 100 columns: summaries; the wide
+tables go to the report and CSV), ``html_section(folder)`` for the report
 (it writes its figures into ``folder`` and returns an HTML fragment that refers to them by
 relative path), ``write_data(folder)`` for CSV/JSON, ``to_dict()`` and ``ok``.
 """
@@ -25,7 +26,7 @@ SAMPLINGS = ("uniform", "solver-steps", "both")
 @dataclass(frozen=True)
 class StudyOptions:
     """What every study is told: where to write, how thorough to be, whether to show
-    progress bars, and which statistics to take (``SAMPLINGS``; studies without a
+    progress (a bar on a terminal, one-line logs elsewhere), and which statistics to take (``SAMPLINGS``; studies without a
     variable-step variant ignore it)."""
 
     out_dir: Path
@@ -40,6 +41,13 @@ class StudyOptions:
             raise NonholoInputError(f"unknown sampling {self.sampling!r} (valid: {', '.join(SAMPLINGS)})")
         object.__setattr__(self, "out_dir", Path(self.out_dir))
 
+    def progress_for(self, label: str, total: int, unit: str = "steps"):
+        """A ``Progress`` for ``total`` steps of this study: a bar on a terminal, one-line logs
+        elsewhere, nothing if ``progress`` is False (``nonholo.studies.progress``)."""
+        from nonholo.studies.progress import Progress, mode_for
+
+        return Progress(label, total, mode_for(self.progress), unit)
+
     def folder(self, study: str) -> Path:
         """The study's own folder inside the report (created)."""
         path = self.out_dir / study
@@ -52,7 +60,8 @@ class StudyResult(ABC):
 
     name: str
     title: str
-    elapsed_s: float
+    elapsed_s: float  # wall time of the study's simulations and statistics (not of its figures)
+    spec_file: str = "leader.md"  # the specification file its citations ("spec §5.3", "erratum 19") refer to
 
     @property
     def ok(self) -> bool:
@@ -79,17 +88,18 @@ class StudyResult(ABC):
 
 @dataclass(frozen=True)
 class Study:
-    """A registered study: ``name`` (the CLI's argument), ``title``, one-line ``summary``
-    and ``run(options) -> StudyResult``."""
+    """A registered study: ``name`` (the CLI's argument), ``title``, one-line ``summary``,
+    ``run(options) -> StudyResult`` and its place in the report (``order``, then name)."""
 
     name: str
     title: str
     summary: str
     run: Callable[[StudyOptions], StudyResult]
+    order: int = 100
 
 
 def discover() -> dict[str, Study]:
-    """Every ``STUDY`` defined by a module of this package, by name (sorted)."""
+    """Every ``STUDY`` defined by a module of this package, in report order (``order``, name)."""
     import nonholo.studies as package
 
     found = {}
@@ -101,4 +111,4 @@ def discover() -> dict[str, Study]:
             if study.name in found:
                 raise RuntimeError(f"two studies are named {study.name!r}")
             found[study.name] = study
-    return found
+    return dict(sorted(found.items(), key=lambda item: (item[1].order, item[0])))

@@ -11,33 +11,29 @@
   jump of a step change), the claim of thesis §5.6;
 * "differences from the thesis" generated from those numbers, citing the spec's errata.
 
-The table/result machinery here (``SpecValue``, ``Table``, ``TabulatedStudyResult``) is
-shared with the posture study (``nonholo.studies.posture``).
+Tables, findings and the comparisons with the spec use the shared framework
+(``nonholo.studies.framework``).
 
 Quick mode (``--quick``): dt = 0.02 s instead of 0.01 s and a shorter GIF (grid means
 move by ≈ k·dt/2 relative, so a few spec comparisons are then looser).
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import math
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from nonholo import examples
+from nonholo import examples, load_scenario
 from nonholo.formation import (Follower, Formation, FormationResult, link_state, separation_bearing,
                                simulate_formation)
 from nonholo.sim.targets import target_segments
-from nonholo.sim.files import load_scenario
-from nonholo.studies.base import Study, StudyOptions, StudyResult
-from nonholo.studies.leader import Finding, _fmt, _text_table
-from nonholo.studies.report import escape, html_figure, html_list, html_table
+from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
+                                       TabulatedStudyResult, Table, degrees, show)
 
 QUICK_DT = 0.02
 GIF_FRAMES, QUICK_GIF_FRAMES = 60, 20
@@ -61,31 +57,6 @@ THESIS_CLAIM_MINIMIZES = ("the input-output feedback linearization for the follo
 THESIS_CLAIM_RUN_TIME = ("if the parameter values of the separation bearing and separation-separation controllers "
                          "are changed dynamically at run time, the feedback linearized control strategies "
                          "successfully minimizes the error")
-
-
-@dataclass(frozen=True)
-class SpecValue:
-    """A reference number as the spec prints it (``text``) and the range of our values
-    that reproduce it (``low`` ≤ ours ≤ ``high``; wide where the spec says a value is
-    integration-sensitive or round-off)."""
-
-    text: str
-    low: float
-    high: float
-    sensitive: bool = False  # integration-sensitive (near-singular passages, sampled peaks)
-
-    @classmethod
-    def approx(cls, value: float, rel: float = 0.0, abs_: float = 0.0, text: str | None = None,
-               sensitive: bool = False) -> "SpecValue":
-        slack = max(abs(value) * rel, abs_)
-        return cls(text or f"{value:g}", value - slack, value + slack, sensitive)
-
-    @classmethod
-    def below(cls, bound: float, text: str) -> "SpecValue":
-        return cls(text, -math.inf, bound)
-
-    def agrees(self, ours: float | None) -> bool:
-        return ours is not None and math.isfinite(ours) and self.low <= ours <= self.high
 
 
 # Source: shared spec follower-posture.md §6 (a)–(c) (reference simulation, RK4, dt = 0.01 s), §2.4,
@@ -132,160 +103,6 @@ SPEC_REFERENCE: dict[str, dict[str, SpecValue]] = {
     "ll-T1-bearings": {"phi_1F": SpecValue.approx(188.0, abs_=3.0, text="≈188°"),
                        "phi_2F": SpecValue.approx(270.0, abs_=3.0, text="≈270°")},
 }
-
-
-# ------------------------------------------------------------------ tables and the shared result class
-
-@dataclass(frozen=True)
-class Column:
-    """A table column: ``label``, the record ``key`` and how to show its value."""
-
-    label: str
-    key: str
-    show: Callable[[object], str] = field(default=lambda v: _show(v))
-
-
-def _show(value) -> str:
-    if value is None:
-        return "–"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, (int, float, np.floating)):
-        value = float(value)
-        if not math.isfinite(value):
-            return str(value)
-        return f"{value:.2e}" if value != 0 and abs(value) < 1e-3 else _fmt(abs(value)) if value >= 0 \
-            else "-" + _fmt(-value)
-    return str(value)
-
-
-def degrees(value) -> str:
-    return "–" if value is None else f"{value:.3f}°"
-
-
-@dataclass(frozen=True)
-class Table:
-    """Records (dicts of raw values, written to CSV/JSON) and the columns that show them."""
-
-    key: str
-    caption: str
-    columns: Sequence[Column]
-    records: Sequence[dict]
-
-    @property
-    def header(self) -> list[str]:
-        return [c.label for c in self.columns]
-
-    def rows(self) -> list[list[str]]:
-        return [[c.show(r.get(c.key)) for c in self.columns] for r in self.records]
-
-    def text(self) -> str:
-        return f"{self.caption}\n{_text_table(self.header, self.rows())}"
-
-    def html(self) -> str:
-        return html_table(self.header, self.rows(), self.caption)
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """One of our numbers beside the spec's reference value."""
-
-    case: str
-    quantity: str
-    ours: float | None
-    spec: SpecValue
-
-    @property
-    def agrees(self) -> bool:
-        return self.spec.agrees(self.ours)
-
-    def record(self) -> dict:
-        return {"case": self.case, "quantity": self.quantity, "ours": self.ours, "spec": self.spec.text,
-                "range": f"[{self.spec.low:.4g}, {self.spec.high:.4g}]", "sensitive": self.spec.sensitive,
-                "agrees": self.agrees}
-
-
-COMPARISON_COLUMNS = (Column("case", "case"), Column("quantity", "quantity"), Column("ours", "ours"),
-                      Column("spec", "spec"), Column("accepted range", "range"),
-                      Column("integration-sensitive", "sensitive"), Column("agrees", "agrees"))
-
-
-class TabulatedStudyResult(StudyResult):
-    """A study result made of ``tables()``, ``findings`` and figures (``write_figures``);
-    subclasses set ``name``, ``title``, ``runs`` (key → FormationResult) and implement
-    ``tables``, ``setup_text`` and ``write_figures``."""
-
-    runs: dict[str, FormationResult]
-    findings: list[Finding]
-    quick: bool
-
-    def tables(self) -> list[Table]:
-        raise NotImplementedError
-
-    def setup_text(self) -> str:
-        raise NotImplementedError
-
-    def write_figures(self, folder: Path) -> list[tuple[str, str]]:
-        """Write the figures into ``folder``; returns (file name, caption) pairs."""
-        raise NotImplementedError
-
-    @property
-    def ok(self) -> bool:
-        """False if any tabulated number is NaN or infinite (a broken simulation)."""
-        return all(math.isfinite(v) for table in self.tables() for record in table.records
-                   for v in record.values() if isinstance(v, (float, np.floating)))
-
-    def text(self) -> str:
-        lines = [self.title, "", self.setup_text(), ""]
-        for table in self.tables():
-            lines += [table.text(), ""]
-        lines += ["Differences from the thesis:"] + [f"- {f.text()}" for f in self.findings]
-        return "\n".join(lines)
-
-    def html_section(self, folder: Path) -> str:
-        parts = [f"<p>{escape(self.setup_text())}</p>", "<h2>Differences from the thesis</h2>",
-                 html_list(f.html() for f in self.findings), "<h2>Tables</h2>"]
-        parts += [table.html() for table in self.tables()]
-        parts.append("<h2>Figures</h2>")
-        for name, caption in self.write_figures(folder):
-            if name.endswith(".gif"):
-                parts.append(f'<figure><img src="{escape(folder.name)}/{escape(name)}" alt="{escape(caption)}">'
-                             f"<figcaption>{escape(caption)}</figcaption></figure>")
-            else:
-                parts.append(html_figure(f"{folder.name}/{name}", caption))
-        return "\n".join(parts)
-
-    def to_dict(self) -> dict:
-        return {"study": self.name, "quick": self.quick, "elapsed_s": self.elapsed_s, "setup": self.setup_text(),
-                "tables": {t.key: {"caption": t.caption, "records": [_json_ready(r) for r in t.records]}
-                           for t in self.tables()},
-                "findings": [dataclasses.asdict(f) for f in self.findings],
-                "runs": {key: run.to_dict() for key, run in self.runs.items()}}
-
-    def write_data(self, folder: Path) -> list[Path]:
-        paths = []
-        for table in self.tables():
-            path = folder / f"{self.name}-{table.key}.csv"
-            keys = list(dict.fromkeys(k for r in table.records for k in r))
-            with open(path, "w", newline="") as handle:
-                writer = csv.DictWriter(handle, keys)
-                writer.writeheader()
-                writer.writerows({k: _csv_value(r.get(k)) for k in keys} for r in table.records)
-            paths.append(path)
-        data = folder / f"{self.name}.json"
-        data.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
-        return paths + [data]
-
-
-def _json_ready(record: dict) -> dict:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else
-                float(v) if isinstance(v, np.floating) else v) for k, v in record.items()}
-
-
-def _csv_value(value) -> str:
-    if value is None:
-        return ""
-    return f"{value:.10g}" if isinstance(value, (float, np.floating)) else str(value)
 
 
 # ------------------------------------------------------------------ the cases
@@ -341,11 +158,15 @@ def wedge_variants(wedge: Formation) -> dict[str, Formation]:
             f"wedge-T4, dt = {wedge.dt / 4:g} s": dataclasses.replace(wedge, dt=wedge.dt / 4)}
 
 
-def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
+def all_cases(quick: bool = False) -> dict[str, Formation]:
     """Every run of the study: the six cases (``CASE_TITLES``) and the wedge variants."""
     cases = build_cases(quick)
     cases.update(wedge_variants(cases["wedge-T4"]))
-    return {key: simulate_formation(formation) for key, formation in cases.items()}
+    return cases
+
+
+def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
+    return {key: simulate_formation(formation) for key, formation in all_cases(quick).items()}
 
 
 # ------------------------------------------------------------------ numbers
@@ -487,6 +308,7 @@ class FormationStudyResult(TabulatedStudyResult):
 
     name = "formation"
     title = "Formations: thesis §5.5–5.6 reproduced (Figures 5.39–5.45)"
+    spec_file = "follower-posture.md"
 
     def __init__(self, runs: dict[str, FormationResult], quick: bool, elapsed_s: float, gif_frames: int = GIF_FRAMES):
         self.runs, self.quick, self.elapsed_s, self.gif_frames = runs, quick, elapsed_s, gif_frames
@@ -514,18 +336,18 @@ class FormationStudyResult(TabulatedStudyResult):
         return [
             Table("links", "Follower output errors (|z − z_d|: separations in m, bearings in rad; means over the "
                   "uniform grid) and the deviation from the exact closed loop e0·e^(−kt)",
-                  [Column("case", "case"), Column("follower", "follower"), Column("outputs", "outputs"),
-                   Column("|e1(0)|", "e1_start"), Column("|e2(0)|", "e2_start"), Column("final |e1|", "e1_final"),
+                  [Column("case", "case"), Column("follower", "follower"), Column("outputs", "outputs", terminal=False),
+                   Column("|e1(0)|", "e1_start", terminal=False), Column("|e2(0)|", "e2_start", terminal=False), Column("final |e1|", "e1_final"),
                    Column("final |e2|", "e2_final"), Column("mean |e1|", "e1_mean"), Column("mean |e2|", "e2_mean"),
-                   Column("max |e − e0·e^(−kt)|", "exactness"), Column("min |sin(γ1−γ2)|", "min_sin"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("peak |ω| (rad/s)", "peak_omega")], self.links),
+                   Column("max |e − e0·e^(−kt)|", "exactness"), Column("min |sin(γ1−γ2)|", "min_sin", terminal=False),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False), Column("peak |ω| (rad/s)", "peak_omega", terminal=False)], self.links),
             Table("switch", f"Eq 5.9: φ_d = π/3 → π + π/3 at t = {THESIS_EQ_5_9['at']:g} s on Test 4 (2 % settling band "
                   "of the π step; analytic ln 50 / k2)",
                   [Column("case", "case"), Column("settling (s)", "settling"), Column("analytic (s)", "analytic"),
-                   Column("|φ error − ideal step| at the next sample (rad)", "onset"),
-                   Column("max |l − l_d| after (m)", "l_disturbance"), Column("castor point passes", "passes"),
+                   Column("|φ error − ideal step| at the next sample (rad)", "onset", terminal=False),
+                   Column("max |l − l_d| after (m)", "l_disturbance", terminal=False), Column("castor point passes", "passes"),
                    Column("min axle distance after (m)", "min_distance_after"),
-                   Column("peak |v| after (m/s)", "peak_v_after"), Column("peak |ω| after (rad/s)", "peak_omega_after")],
+                   Column("peak |v| after (m/s)", "peak_v_after", terminal=False), Column("peak |ω| after (rad/s)", "peak_omega_after", terminal=False)],
                   [self.switch]),
             Table("bearings", "Eq 5.10: final bearings of the l–l follower F from the leader (φ_1F) and from R2 (φ_2F), "
                   "beside the values the thesis prints (not outputs of the l–l law)",
@@ -534,20 +356,21 @@ class FormationStudyResult(TabulatedStudyResult):
                    Column("φ_2F Eq 5.10", "eq_phi_2F")], self.bearings),
             Table("wedge", "The wedge (spec §3.3) under three integrations: the side of the leader–R2 line that F "
                   "ends on (Eq 5.10's 240°/120° or the mirror image 300°/60°) is decided near the singularity",
-                  [Column("run", "case"), Column("dt (s)", "dt"), Column("max sub-steps", "max_substeps"),
+                  [Column("run", "case"), Column("dt (s)", "dt"), Column("max sub-steps", "max_substeps", terminal=False),
                    Column("min |sin(γ1−γ2)|", "min_sin"), Column("at t (s)", "min_sin_time"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("max |e − e0·e^(−kt)| (m)", "exactness"),
-                   Column("final |l13 − 2|", "e1_final"), Column("final |l23 − 2|", "e2_final"),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False),
+                   Column("max |e − e0·e^(−kt)| (m)", "exactness", terminal=False),
+                   Column("final |l13 − 2|", "e1_final", terminal=False), Column("final |l23 − 2|", "e2_final", terminal=False),
                    Column("φ_1F", "phi_1F", degrees), Column("φ_2F", "phi_2F", degrees)], self.wedge),
             Table("safety", "Clearance (thesis §2.5.1 asks for l > 2d) and duration per case: closest pair of axle "
                   "centres over the run, first follower's axle distance to its leader at the end",
                   [Column("case", "case"), Column("closest pair", "pair"), Column("min distance (m)", "min_distance"),
                    Column("at t (s)", "min_distance_time"), Column("final distance (m)", "final_distance"),
-                   Column("2d (m)", "two_d"), Column("time below 2d (s)", "time_below_2d"),
-                   Column("T (s)", "duration")], self.safety),
+                   Column("2d (m)", "two_d"), Column("time below 2d (s)", "time_below_2d", terminal=False),
+                   Column("T (s)", "duration", terminal=False)], self.safety),
             Table("spec", "Our numbers beside the spec's reference numbers (follower-posture.md §6 (a)–(c), §2.4, "
                   "§3.3; finals are round-off: reproduced below 1e-9; means within 1.2 %: grid vs continuous means)",
-                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons]),
+                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons], terminal=False),
         ]
 
     def setup_text(self) -> str:
@@ -621,7 +444,7 @@ def _run_time_change(result: FormationStudyResult) -> Finding:
     return Finding(f"Thesis §5.6: “{THESIS_CLAIM_RUN_TIME}” (Eq 5.9)", "holds" if holds else "fails" if not settled
                    else "partly",
                    f"after the π step at {s['at']:g} s the bearing settles into the 2 % band in "
-                   f"{_show(s['settling'])} s (analytic ln 50/k2 = {s['analytic']:.3f} s), l stays within "
+                   f"{show(s['settling'])} s (analytic ln 50/k2 = {s['analytic']:.3f} s), l stays within "
                    f"{s['l_disturbance']:.1e} m of l_d, and the castor point passes {s['passes']} the leader "
                    f"(closest axle distance after the change {s['min_distance_after']:.3f} m).",
                    "Eq 5.9 does not say which way a ±π change turns: under a wrapped error round-off decides "
@@ -689,16 +512,15 @@ def _speed_demands(result: FormationStudyResult) -> Finding:
 
 
 def _spec_agreement(result: FormationStudyResult) -> Finding:
-    robust = [c for c in result.comparisons if not c.spec.sensitive]
-    sensitive = [c for c in result.comparisons if c.spec.sensitive]
-    missing = [c for c in robust if not c.agrees]
+    agreement = Agreement.of(result.comparisons)
+    missing = [c for c in agreement.robust if not c.agrees]
     return Finding("Spec reference numbers (follower-posture.md §6)", "holds" if not missing else "partly",
-                   f"{sum(c.agrees for c in robust)} of {len(robust)} robust values reproduced"
-                   + (" (not " + ", ".join(f"{c.case} {c.quantity}: ours {_show(c.ours)}, spec {c.spec.text}"
+                   f"{sum(c.agrees for c in agreement.robust)} of {len(agreement.robust)} robust values reproduced"
+                   + (" (not " + ", ".join(f"{c.case} {c.quantity}: ours {show(c.ours)}, spec {c.spec.text}"
                                            for c in missing) + ")" if missing else "")
-                   + f"; {sum(c.agrees for c in sensitive)} of {len(sensitive)} integration-sensitive values of the "
-                   "near-singular wedge (" + ", ".join(f"{c.quantity} {'yes' if c.agrees else 'no'}" for c in sensitive)
-                   + ").",
+                   + f"; {sum(c.agrees for c in agreement.sensitive)} of {len(agreement.sensitive)} "
+                   "integration-sensitive values of the near-singular wedge ("
+                   + ", ".join(f"{c.quantity} {'yes' if c.agrees else 'no'}" for c in agreement.sensitive) + ").",
                    "QUICK MODE: the coarser grid moves grid means and sampled peaks." if result.quick and missing else
                    "the wedge's numbers depend on how the passage near sin(γ1 − γ2) = 0 is integrated (see the wedge "
                    "table).")
@@ -708,7 +530,13 @@ def _spec_agreement(result: FormationStudyResult) -> Finding:
 
 def run_formation(options: StudyOptions) -> FormationStudyResult:
     started = time.perf_counter()
-    runs = simulate_cases(options.quick)
+    cases = all_cases(options.quick)
+    runs = {}
+    with options.progress_for("study formation", len(cases), "runs") as progress:
+        for key, case in cases.items():
+            progress.start(key)
+            runs[key] = simulate_formation(case)
+            progress.done()
     return FormationStudyResult(runs, options.quick, time.perf_counter() - started,
                                 QUICK_GIF_FRAMES if options.quick else GIF_FRAMES)
 
@@ -717,6 +545,7 @@ STUDY = Study(
     name="formation", title=FormationStudyResult.title,
     summary="l-phi and l-l followers on Tests 1 and 4, the Eq 5.9 change, Eq 5.10 bearings; thesis §5.5-5.6",
     run=run_formation,
+    order=2,
 )
 
 
@@ -743,20 +572,22 @@ def _target(result: FormationResult, follower: str, output: int) -> np.ndarray:
 def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
     """Thesis Figures 5.41–5.42: separation and bearing of the l–φ follower over time, the
     output errors against the exact e0·e^(−kt), and the Eq 5.9 change close up."""
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import plt, series_style
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, wspace=0.22, hspace=0.3)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 12))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.16, top=0.93, wspace=0.22, hspace=0.62)
     ax_l, ax_phi, ax_err, ax_zoom = axes.ravel()
-    for case in ("lphi-T1", "lphi-T4", "switch-T4"):
+    # the three runs coincide until t = 100 s: widest first, so that every line stays visible
+    for number, case in enumerate(("lphi-T1", "lphi-T4", "switch-T4")):
         run, color = study.runs[case], CASE_COLORS[case]
+        style = series_style(number)
         follower = run.formation.followers[0]
         l, phi = run.outputs(follower.name)
-        ax_l.plot(run.t, l, color=color, lw=1.4, label=CASE_TITLES[case])
-        ax_phi.plot(run.t, np.degrees(phi), color=color, lw=1.4, label=CASE_TITLES[case])
-        for output, style, unit in ((0, "-", "m"), (1, "--", "rad")):
+        ax_l.plot(run.t, l, **dict(style, color=color), label=CASE_TITLES[case])
+        ax_phi.plot(run.t, np.degrees(phi), **dict(style, color=color), label=CASE_TITLES[case])
+        for output, dashes, unit in ((0, "-", "m"), (1, (0, (5, 2)), "rad")):
             error = np.abs(run.output_errors(follower.name)[output])
-            ax_err.semilogy(run.t, np.maximum(error, 1e-16), color=color, ls=style, lw=1.2,
+            ax_err.semilogy(run.t, np.maximum(error, 1e-16), color=color, ls=dashes, lw=(2.8, 1.9, 1.1)[number],
                             label=f"{CASE_TITLES[case]}: |{SYMBOLS[follower.outputs[output]]} − "
                                   f"{SYMBOLS[follower.outputs[output]]}_d| ({unit})")
         if case == "switch-T4":
@@ -769,7 +600,8 @@ def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
             ax_zoom.plot(run.t[near], np.degrees(_target(run, follower.name, 1)[near]), "k--", lw=1.2,
                          label="φ_d (Eq 5.9)")
             ax_zoom.axhline(180.0, color="0.5", lw=0.8, ls=":")
-            ax_zoom.text(at - 1.8, 185.0, "φ = 180°: straight behind the leader", fontsize=9, color="0.3")
+            ax_zoom.text(at + 9.8, 172.0, "φ = 180°: straight behind the leader", fontsize=9, color="0.3",
+                         ha="right", va="top")
             band = 0.02 * 180.0
             final = np.degrees(THESIS_EQ_5_9["phi_after"])
             ax_zoom.axhspan(final - band, final + band, color="tab:green", alpha=0.15, label="2 % settling band")
@@ -780,23 +612,23 @@ def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
     ax_l.axhline(THESIS_EQ_5_8["l_d"], color="k", ls="--", lw=1.2, label="l_d = 2 m (Eq 5.8)")
     ax_phi.axhline(60.0, color="k", ls="--", lw=1.2, label="φ_d = 60° (Eq 5.8)")
     ax_phi.axhline(240.0, color="k", ls=":", lw=1.2, label="φ_d = 240° after t = 100 s (Eq 5.9)")
-    ax_l.set(xlabel="time t (s)", ylabel="separation l (m)", title="Separation (thesis Fig 5.41)", xlim=(0, 30))
+    ax_l.set(xlabel="time t (s)", ylabel="separation l (m)", xlim=(0, 30),
+             title="Separation (thesis Fig 5.41), first 30 s; l = l_d afterwards")
     ax_phi.set(xlabel="time t (s)", ylabel="bearing φ (degrees)", title="Bearing (thesis Fig 5.42)")
     ax_err.set(xlabel="time t (s)", ylabel="|output error| (m or rad, log scale)", ylim=(1e-16, 10),
                title="Output errors: exactly exponential, re-excited by the switch")
     ax_zoom.set(xlabel="time t (s)", ylabel="bearing φ (degrees)", title="Eq 5.9 change at t = 100 s, close up")
-    ax_l.text(0.98, 0.05, "first 30 s shown; l = l_d afterwards.\nThe three runs coincide until t = 100 s: the "
-              "closed loop\ndoes not depend on the leader's path", transform=ax_l.transAxes, ha="right", fontsize=9)
     finish_figure(fig, axes, "l–φ follower: separation and bearing (Eq 5.8, 5.9), leader on Tests 1 and 4", path)
 
 
 def finish_figure(fig, axes, title: str, path: Path) -> None:
-    """Grid and legend on every panel, the title, saved to ``path`` and closed."""
+    """Grid on every panel, each panel's legend under it (never over the data), the title;
+    saved to ``path`` and closed."""
     from nonholo.studies.plots import plt
 
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, frameon=False)
     fig.suptitle(title, fontsize=14)
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -807,8 +639,8 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
     (not controlled) beside Eq 5.10's values, and |sin(γ1 − γ2)|."""
     from nonholo.studies.plots import plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, wspace=0.22, hspace=0.3)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 11))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.93, wspace=0.22, hspace=0.55)
     ax_l, ax_sin, ax_b1, ax_b2 = axes.ravel()
     variant = next(key for key in study.runs if key.startswith("wedge-T4,"))
     for case in ("ll-T1", "ll-T4", "wedge-T4", variant):
@@ -822,11 +654,13 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
                     alpha=0.6 if case == variant else 1.0, label=CASE_TITLES.get(case, case))
         if case == variant:
             continue
+        # ll-T1 and ll-T4 coincide where the closed loop ignores the leader's path: widest first
+        width = {"ll-T1": 3.2, "ll-T4": 1.9}.get(case, 1.1)
         l1, l2 = run.outputs(follower.name)
-        ax_l.plot(run.t, l1, color=color, lw=1.4, label=f"{CASE_TITLES[case]}: l13 (to leader)")
-        ax_l.plot(run.t, l2, color=color, lw=1.4, ls="--", label=f"{CASE_TITLES[case]}: l23 (to R2)")
+        ax_l.plot(run.t, l1, color=color, lw=width, label=f"{CASE_TITLES[case]}: l13 (to leader)")
+        ax_l.plot(run.t, l2, color=color, lw=width, ls=(0, (5, 2)), label=f"{CASE_TITLES[case]}: l23 (to R2)")
         ax_sin.semilogy(run.t, np.maximum(np.abs(run.sin_gamma_difference(follower.name)), 1e-6), color=color,
-                        lw=1.2, label=CASE_TITLES[case])
+                        lw=width, label=CASE_TITLES[case])
     ax_l.axhline(THESIS_EQ_5_10["l1_d"], color="k", ls=":", lw=1.2, label="l_d = 2 m (Eq 5.10)")
     ax_sin.axhline(NEAR_SINGULAR, color="k", ls=":", lw=1.2, label=f"{NEAR_SINGULAR:g}: nearly singular")
     for ax, key in ((ax_b1, "phi_1F"), (ax_b2, "phi_2F")):
@@ -844,14 +678,23 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
 
 def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[tuple[str, str]]:
     figures = []
+    from nonholo.studies.plots import plot_formation_case
+
     for case in CASE_TITLES:
         name = f"paths-{case}.png"
-        study.runs[case].plot(folder / name)
-        figures.append((name, f"{CASE_TITLES[case]} ({THESIS_FIGURES[case]}): paths with snapshots (triangles at "
-                              f"equal time steps), output errors, speed and turn-rate demands."))
+        run = study.runs[case]
+        source = f" (thesis {THESIS_FIGURES[case]})" if THESIS_FIGURES[case].startswith("Fig") else ""
+        plot_formation_case(run, f"{CASE_TITLES[case]}{source}: {len(run.formation.robots)} robots, "
+                                 f"{run.t[-1]:.5g} s, dt = {run.formation.dt:g} s", folder / name)
+        figures.append((name, f"{CASE_TITLES[case]}{source}: paths with snapshots (triangles at "
+                              "equal time steps; grey: leader axle → follower castor point), the follower output "
+                              "errors, and each robot's applied speed v and turn rate ω (one panel each; start-up "
+                              "peaks outside a row's scale are clipped and named above the panel)."))
     plot_bearing_outputs(study, folder / "lphi-outputs.png")
     figures.insert(2, ("lphi-outputs.png", "l–φ separation and bearing over time (Fig 5.41–5.42) and the Eq 5.9 "
-                                           "change close up."))
+                                           "change close up. The three runs coincide until t = 100 s (the closed "
+                                           "loop does not depend on the leader's path): the widest line is drawn "
+                                           "first, so each stays visible."))
     plot_separation_outputs(study, folder / "ll-outputs.png")
     figures.append(("ll-outputs.png", "l–l follower: controlled distances, singularity margin, and the bearings that "
                                       "Eq 5.10 lists but the law does not control."))

@@ -3,7 +3,7 @@
 * Tests 1–4 × the five thesis controllers (+ offset-point as a sixth column) with the
   spec's canonical set-up (leader.md §5.1: the bundled ``test*.toml`` examples), statistics
   on the uniform grid and over the accepted steps of a Simulink-like variable-step solver
-  (``nonholo.sim.solver_steps``), next to Tables 5.2–5.5 (``thesis_values``);
+  (``nonholo.studies.solver_steps``), next to Tables 5.2–5.5 (``thesis_values``);
 * the gain sweeps of Table 5.6 on Test 1, each one batch, with the trend of the mean error
   classified from the data (``sweep.classify_trend``);
 * "differences from the thesis": findings computed from those numbers, with the reasons
@@ -26,12 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from nonholo import examples
-from nonholo.sim.files import load_scenario
-from nonholo.sim.simulator import simulate
-from nonholo.sim.solver_steps import SolverStepResult, solver_step_statistics
+from nonholo import load_scenario, simulate
 from nonholo.studies import thesis_values as thesis
 from nonholo.studies.base import Study, StudyOptions, StudyResult
+from nonholo.studies.framework import (TERMINAL_WIDTH, Finding, agreement_score, findings_text, fitted_table, fmt,
+                                       log_ratio, wrap)
 from nonholo.studies.report import escape, html_figure, html_list, html_table
+from nonholo.studies.solver_steps import SolverStepResult, solver_step_statistics
 from nonholo.studies.sweep import GainAxis, SweepResult, SweepSpec, Trend, run_sweeps
 
 EXAMPLES = {"T1": "test1-eight", "T2": "test2-line", "T3": "test3-sinusoid", "T4": "test4-circle"}
@@ -39,6 +40,8 @@ TEST_TITLES = {"T1": "Test 1: figure eight", "T2": "Test 2: straight line", "T3"
                "T4": "Test 4: circle, robot starting at its centre"}
 # The path panel shows only the start of long, thin references.
 PATH_WINDOW = {"T1": None, "T2": 20.0, "T3": 25.0, "T4": None}
+# The v, ω and heading-error panels show the first seconds, where the controllers differ.
+INPUT_WINDOW = {"T1": 60.0, "T2": 20.0, "T3": 25.0, "T4": 60.0}
 CONTROLLERS = (*thesis.THESIS_CONTROLLERS, "offset-point")
 LABELS = {"approximate-linearization": "approx. lin.", "nonlinear": "nonlinear", "cascaded": "cascaded",
           "kanayama": "stable tracking", "dynamic-feedback": "dynamic FL", "offset-point": "offset point"}
@@ -60,11 +63,6 @@ SWEEP_RANGES = {
 }
 SWEEP_POINTS, QUICK_SWEEP_POINTS = 41, 7
 SWEEP_TEST = "T1"
-
-
-def log_ratio(ours: float, reference: float) -> float:
-    """|ln(ours/reference)|: 0 = equal, ln 10 = a factor of ten (inf if either is ≤ 0)."""
-    return abs(math.log(ours / reference)) if ours > 0 and reference > 0 else math.inf
 
 
 @dataclass(frozen=True)
@@ -105,26 +103,6 @@ class GainEffect:
         return self.trend.agrees_with(self.claim)
 
 
-@dataclass(frozen=True)
-class Finding:
-    """One generated statement of the "differences" section: ``verdict`` is
-    "holds", "fails", "partly" or "note"; ``evidence`` is computed; ``reason`` cites the spec."""
-
-    topic: str
-    verdict: str
-    evidence: str
-    reason: str = ""
-
-    def text(self) -> str:
-        reason = f" Why: {self.reason}" if self.reason else ""
-        return f"[{self.verdict}] {self.topic}: {self.evidence}{reason}"
-
-    def html(self) -> str:
-        reason = f" <span class=\"note\">Why: {escape(self.reason)}</span>" if self.reason else ""
-        return (f'<span class="{escape(self.verdict)}">{escape(self.verdict)}</span> — <b>{escape(self.topic)}</b>: '
-                f"{escape(self.evidence)}{reason}")
-
-
 # ---------------------------------------------------------------------------------- running
 
 def canonical_scenario(test: str, quick: bool):
@@ -155,7 +133,7 @@ def _statistics(metrics: dict) -> dict:
 
 
 def run_leader(options: StudyOptions) -> "LeaderStudyResult":
-    """Run everything (progress bar over the tasks unless ``options.progress`` is False)."""
+    """Run everything (progress over the tasks unless ``options.progress`` is False)."""
     started = time.perf_counter()
     solver = options.sampling in ("solver-steps", "both")
     tasks: list[tuple[str, Callable[[], object]]] = []
@@ -166,12 +144,11 @@ def run_leader(options: StudyOptions) -> "LeaderStudyResult":
                           lambda test=test: solver_step_statistics(canonical_scenario(test, False))))
     tasks.append(("gain sweeps", lambda: simulate_gain_effects(options.quick)))
     outputs = {}
-    from tqdm import tqdm
-
-    with tqdm(tasks, desc="leader study", unit="task", disable=not options.progress, leave=False) as bar:
-        for label, task in bar:
-            bar.set_postfix_str(label)
+    with options.progress_for("study leader", len(tasks)) as progress:
+        for label, task in tasks:
+            progress.start(label)
             outputs[label] = task()
+            progress.done()
     runs = {test: outputs[f"simulate {test}"] for test in EXAMPLES}
     solver_runs = {test: outputs.get(f"solver steps {test}") for test in EXAMPLES}
     effects = outputs["gain sweeps"]
@@ -220,8 +197,8 @@ class LeaderStudyResult(StudyResult):
 
     def score(self, statistic: str, sampling: str) -> float:
         """Spec §5.3's agreement score: mean over the 20 cells of |ln(ours/thesis)|."""
-        return float(np.mean([log_ratio((c.uniform if sampling == "uniform" else c.solver)[statistic],
-                                        c.thesis[statistic]) for c in self.cells.values() if c.thesis]))
+        return agreement_score(((c.uniform if sampling == "uniform" else c.solver)[statistic], c.thesis[statistic])
+                               for c in self.cells.values() if c.thesis)
 
     def convergence_time(self, test: str, controller: str) -> float | None:
         """First time after which the error stays below ``CONVERGED`` (None if never)."""
@@ -240,35 +217,68 @@ class LeaderStudyResult(StudyResult):
         rows = []
         for c in CONTROLLERS:
             cell = self.cells[(test, c)]
-            row = [LABELS[c], _fmt(cell.uniform["mean"]), _fmt(cell.uniform["std"]), _fmt(cell.uniform["var"]),
-                   _fmt(cell.uniform["final"]), str(ours_rank.get(c, "–"))]
-            row += ([_fmt(cell.thesis[s]) for s in thesis.STATISTICS] + [str(thesis_rank[c]), f"{cell.ratio():.3g}"]
+            row = [LABELS[c], fmt(cell.uniform["mean"]), fmt(cell.uniform["std"]), fmt(cell.uniform["var"]),
+                   fmt(cell.uniform["final"]), str(ours_rank.get(c, "–"))]
+            row += ([fmt(cell.thesis[s]) for s in thesis.STATISTICS] + [str(thesis_rank[c]), f"{cell.ratio():.3g}"]
                     if cell.thesis else ["–"] * 5)
             if self.has_solver:
-                row += [_fmt(cell.solver["mean"]), _fmt(cell.solver["std"]), str(solver_rank.get(c, "–")),
+                row += [fmt(cell.solver["mean"]), fmt(cell.solver["std"]), str(solver_rank.get(c, "–")),
                         f"{cell.ratio('mean', 'solver'):.3g}" if cell.thesis else "–"]
             rows.append(row)
         return rows
 
     def table_header(self) -> list[str]:
-        header = ["controller", "mean", "std", "var", "e(T)", "rank", "thesis mean", "thesis std", "thesis var",
-                  "thesis rank", "mean/thesis"]
+        header = ["controller", "mean", "std", "var", "e(T)", "rank", "mean", "std", "var", "rank", "ours/ thesis"]
         if self.has_solver:
-            header += ["solver-step mean", "solver-step std", "solver rank", "solver mean/thesis"]
+            header += ["mean", "std", "rank", "mean/ thesis"]
         return header
+
+    def table_groups(self) -> list[tuple[str, int]]:
+        groups = [("", 1), ("ours, uniform grid", 5), ("thesis", 4), ("mean", 1)]
+        return groups + ([("ours, over solver steps", 4)] if self.has_solver else [])
 
     def table_caption(self, test: str) -> str:
         steps = self.runs[test].scenario.n_steps
         return (f"{TEST_TITLES[test]} (thesis {thesis.TABLE_OF_TEST[test]}): error norm in m, var in m²; ours on the "
                 f"uniform grid (N = {steps}), ranks among the five thesis controllers by mean")
 
-    def text(self) -> str:
-        lines = [self.title, ""]
+    def summary_rows(self, test: str) -> list[list[str]]:
+        """The terminal's per-test table: ours, the thesis's mean, the ratio, ranks, solver steps."""
+        ours_rank, thesis_rank = self.ranks(test, "uniform"), self.ranks(test, "thesis")
+        rows = []
+        for c in CONTROLLERS:
+            cell = self.cells[(test, c)]
+            rank = f"{ours_rank[c]} ({thesis_rank[c]})" if c in thesis_rank else "–"
+            row = [LABELS[c], fmt(cell.uniform["mean"]), fmt(cell.uniform["std"]), fmt(cell.uniform["final"]),
+                   fmt(cell.thesis["mean"]) if cell.thesis else "–", f"{cell.ratio():.3g}" if cell.thesis else "–",
+                   rank]
+            if self.has_solver:
+                row += [fmt(cell.solver["mean"]), f"{cell.ratio('mean', 'solver'):.3g}" if cell.thesis else "–"]
+            rows.append(row)
+        return rows
+
+    def summary_header(self) -> list[str]:
+        header = ["controller", "mean", "std", "e(T)", "thesis", "ratio", "rank"]
+        return header + (["solver", "ratio"] if self.has_solver else [])
+
+    def text(self, width: int = TERMINAL_WIDTH) -> str:
+        """A summary for the terminal (the full tables are in the report and its CSV)."""
+        lines = [self.title, "", wrap("Error norm ‖p_d − p‖ in m. mean, std, e(T): ours on the uniform grid; "
+                                      "thesis: its mean (Tables 5.2–5.5); ratio: ours/thesis; rank: ours (thesis) "
+                                      "among the five thesis controllers"
+                                      + ("; solver: our mean over the accepted steps of a Simulink-like "
+                                         "variable-step solver, and its ratio to the thesis." if self.has_solver
+                                         else ".")
+                                      + (" QUICK MODE: not the canonical numbers." if self.quick else ""), width), ""]
         for test in EXAMPLES:
-            lines += [self.table_caption(test), _text_table(self.table_header(), self.table_rows(test)), ""]
-        lines += ["Table 5.6 (Test 1 sweeps): effect of increasing the gain on the mean error",
-                  _text_table(["controller", "gain", "range", "ours", "thesis", "agrees"], self.effect_rows()), ""]
-        lines += ["Differences from the thesis:"] + [f"- {f.text()}" for f in self.findings]
+            lines += [f"{TEST_TITLES[test]} (thesis {thesis.TABLE_OF_TEST[test]})",
+                      fitted_table(self.summary_header(), self.summary_rows(test), width), ""]
+        lines += ["Table 5.6 (Test 1 sweeps): how the mean error moves as each gain increases",
+                  fitted_table(["controller", "gain", "ours", "thesis", "agrees"],
+                               [[r[0], r[1], r[3], e.claim, r[5]] for r, e in zip(self.effect_rows(), self.effects)],
+                               width, ["range"]), ""]
+        lines += ["Differences from the thesis (the reasons, with citations, are in the report):",
+                  findings_text([dataclasses.replace(f, reason="") for f in self.findings], width)]
         return "\n".join(lines)
 
     def effect_rows(self) -> list[list[str]]:
@@ -276,26 +286,35 @@ class LeaderStudyResult(StudyResult):
                  e.trend.word, e.claim_text, "yes" if e.agrees else "no"] for e in self.effects]
 
     def html_section(self, folder: Path) -> str:
-        from nonholo.studies.plots import plot_comparison, plot_sweep_panels, plot_test
+        from nonholo.studies.plots import plot_comparison, plot_sweep_panels, plot_test, plot_test_inputs
 
-        parts = [f"<p>{escape(_setup_text(self))}</p>", "<h2>Differences from the thesis</h2>",
-                 html_list(f.html() for f in self.findings), "<h2>Tables 5.2–5.5, ours beside the thesis</h2>"]
+        parts = [f"<p>{escape(_setup_text(self))}</p>", '<h2 id="leader-differences">Differences from the thesis</h2>',
+                 html_list(f.html() for f in self.findings),
+                 '<h2 id="leader-tables">Tables 5.2–5.5, ours beside the thesis</h2>']
         series = {"ours (uniform grid)": self._means("uniform")}
         if self.has_solver:
             series["ours (solver steps)"] = self._means("solver")
         series["thesis"] = self._means("thesis")
+        for test in EXAMPLES:
+            parts.append(html_table(self.table_header(), self.table_rows(test), self.table_caption(test),
+                                    self.table_groups()))
         plot_comparison(list(EXAMPLES), CONTROLLERS, LABELS, series, folder / "comparison.png")
-        parts.append(html_figure(f"{folder.name}/comparison.png", "Mean error per test and controller "
+        parts.append(html_figure(f"{folder.name}/comparison.png", "Mean error per test and controller, log scale "
                                  "(offset point has no thesis value)."))
         for test in EXAMPLES:
-            parts.append(html_table(self.table_header(), self.table_rows(test), self.table_caption(test)))
-        parts.append("<h2>Per test: paths, error norm, v_d and ω_d (Figures 5.5–5.24)</h2>")
-        for test in EXAMPLES:
+            parts.append(f'<h2 id="leader-{test.lower()}">{escape(TEST_TITLES[test])}</h2>')
             name = f"{test.lower()}.png"
             plot_test(self.runs[test], TEST_TITLES[test], LABELS, folder / name, PATH_WINDOW[test])
-            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: every controller from the "
-                                     "origin with θ(0) = 0 (errors below 1e-7 m drawn at 1e-7 m)."))
-        parts.append("<h2>Table 5.6: gain sweeps on Test 1 (Figures 5.25–5.38)</h2>")
+            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]} (thesis Figures 5.5–5.24): "
+                                     "every controller from the origin with θ(0) = 0. Where two controllers' lines "
+                                     "coincide, the thinner one is drawn inside the wider one."))
+            name = f"{test.lower()}-inputs.png"
+            plot_test_inputs(self.runs[test], TEST_TITLES[test], LABELS, folder / name, INPUT_WINDOW[test])
+            parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: the applied driving speed v and "
+                                     "turn rate ω of each controller beside the reference's v_d and ω_d (dashed), and "
+                                     "its heading error e3 = θ_d − θ wrapped to (−180°, 180°]. Each column shares its "
+                                     "scale; a start-up peak outside it is clipped and named above its panel."))
+        parts.append('<h2 id="leader-sweeps">Table 5.6: gain sweeps on Test 1 (Figures 5.25–5.38)</h2>')
         parts.append(html_table(["controller", "gain", "range", "ours", "thesis", "agrees"], self.effect_rows(),
                                 "Effect of increasing the gain on the mean error (others at Table 5.1 values)"))
         parts.append(f"<p class=\"note\">{escape(_trend_rule())}</p>")
@@ -360,17 +379,6 @@ class LeaderStudyResult(StudyResult):
         data = folder / "leader.json"
         data.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
         return [table, sweeps, data]
-
-
-def _fmt(value: float) -> str:
-    return f"{value:.3g}" if value >= 1e-3 or value == 0 else f"{value:.2e}"
-
-
-def _text_table(header: list[str], rows: list[list[str]]) -> str:
-    widths = [max(len(str(x)) for x in column) for column in zip(header, *rows)]
-    line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)  # noqa: E731
-                                   for i, (c, w) in enumerate(zip(cells, widths)))
-    return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
 def _trend_rule() -> str:
@@ -576,4 +584,5 @@ STUDY = Study(
     name="leader", title=LeaderStudyResult.title,
     summary="Tests 1-4 x five thesis controllers (+ offset point), Tables 5.2-5.6 beside the thesis, gain sweeps",
     run=run_leader,
+    order=1,
 )

@@ -21,15 +21,14 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from nonholo import examples
+from nonholo import examples, load_scenario
 from nonholo.control.posture import POSTURE_CONTROLLERS, goal_frame_pose, polar_command
 from nonholo.formation import Formation, FormationResult, simulate_formation
 from nonholo.models.formation_geometry import wrap
-from nonholo.sim.files import load_scenario
 from nonholo.studies.base import Study, StudyOptions
-from nonholo.studies.formation import (COMPARISON_COLUMNS, QUICK_DT, Column, Comparison, SpecValue,
-                                       TabulatedStudyResult, Table, _show)
-from nonholo.studies.leader import Finding
+from nonholo.studies.formation import QUICK_DT
+from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
+                                       TabulatedStudyResult, Table, show)
 
 LAWS = ("time-varying", "polar", "dynamic-feedback-posture")
 EXAMPLES = {"time-varying": "posture-time-varying", "polar": "posture-polar",
@@ -144,8 +143,11 @@ def build_cases(quick: bool = False) -> dict[str, Formation]:
     return cases
 
 
+all_cases = build_cases
+
+
 def simulate_cases(quick: bool = False) -> dict[str, FormationResult]:
-    return {key: simulate_formation(formation) for key, formation in build_cases(quick).items()}
+    return {key: simulate_formation(formation) for key, formation in all_cases(quick).items()}
 
 
 # ------------------------------------------------------------------ numbers
@@ -199,6 +201,7 @@ def initial_lateral_error(start, goal) -> float:
 class PostureStudyResult(TabulatedStudyResult):
     name = "posture"
     title = "Posture stabilization: thesis §5.7–5.8 reproduced (Figures 5.46–5.51)"
+    spec_file = "follower-posture.md"
 
     def __init__(self, runs: dict[str, FormationResult], quick: bool, elapsed_s: float):
         self.runs, self.quick, self.elapsed_s = runs, quick, elapsed_s
@@ -219,19 +222,22 @@ class PostureStudyResult(TabulatedStudyResult):
         main = [dict(self.record(law, goal), figure=THESIS_FIGURES[(law, goal)],
                      thesis=THESIS_STATEMENTS[(law, goal)]) for law in LAWS for goal in GOALS]
         variants = [r for k, r in self.records.items() if k not in {case_key(l, g) for l in LAWS for g in GOALS}]
-        columns = [Column("case", "case"), Column("goal", "goal"), Column("T (s)", "T"),
-                   Column("final distance (m)", "distance"), Column("max distance, last 10 s (m)", "distance_late_max"),
+        columns = [Column("case", "case"), Column("goal", "goal", terminal=False), Column("T (s)", "T", terminal=False),
+                   Column("final distance (m)", "distance"),
+                   Column("max distance, last 10 s (m)", "distance_late_max", terminal=False),
                    Column("final heading error", "heading_deg", lambda v: f"{v:.3g}°"),
-                   Column(f"time to stay within {NEAR:g} m (s)", "near_time"),
-                   Column("peak |v| (m/s)", "peak_v"), Column("peak |ω| (rad/s)", "peak_omega")]
+                   Column(f"within {NEAR:g} m after (s)", "near_time"),
+                   Column("peak |v| (m/s)", "peak_v", terminal=False), Column("peak |ω| (rad/s)", "peak_omega", terminal=False)]
         return [
             Table("runs", "Thesis runs from (−10, −10), heading 0, to each goal with heading 0, beside the thesis's "
-                  "statements (§5.8; it prints no numbers)",
-                  [*columns[:2], Column("thesis figure", "figure"), *columns[2:],
-                   Column("heading controlled", "heading_controlled"), Column("thesis (§5.8)", "thesis")], main),
+                  "statements (§5.8; it prints no numbers); distance and heading error at the end",
+                  [columns[0], Column("thesis (§5.8)", "thesis"), Column("distance (m)", "distance"),
+                   Column("heading error", "heading_deg", lambda v: f"{v:.3g}°"), columns[1],
+                   Column("thesis figure", "figure", terminal=False), *columns[2:3], *columns[4:5], *columns[6:],
+                   Column("heading controlled", "heading_controlled", terminal=False)], main),
             Table("variants", "Variants that explain §5.8 (spec §5.2 (a)/(b), §5.3, §5.1)", columns, variants),
             Table("spec", "Our numbers beside the spec's reference numbers (follower-posture.md §6 (d))",
-                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons]),
+                  COMPARISON_COLUMNS, [c.record() for c in self.comparisons], terminal=False),
         ]
 
     def setup_text(self) -> str:
@@ -248,9 +254,13 @@ class PostureStudyResult(TabulatedStudyResult):
 
     def write_figures(self, folder: Path) -> list[tuple[str, str]]:
         plot_posture_runs(self, folder / "posture-runs.png")
+        plot_posture_inputs(self, folder / "posture-inputs.png")
         plot_polar_variants(self, folder / "polar-variants.png")
         return [("posture-runs.png", "The three laws to both goals (Figures 5.46–5.51): paths, distance to the goal "
                                      "and heading over time."),
+                ("posture-inputs.png", "What each law applies: driving speed v and turn rate ω to both goals; "
+                                       "start-up peaks outside a column's scale (the dynamic-feedback law's first "
+                                       "turn from rest) are clipped and named above the panel."),
                 ("polar-variants.png", "Thesis §5.8's polar “failure” for goal (−10, 10): the correct law, the goal not "
                                        "translated, and the distance measured from the world origin.")]
 
@@ -274,7 +284,7 @@ def _polar_claim(result: PostureStudyResult) -> Finding:
     hovers = fault["distance"] < 1.0 and fault["distance_late_max"] > CONVERGED
     return Finding(f"Thesis §5.8: “{THESIS_POLAR_FAILS}”", "fails" if converged else "holds",
                    f"the polar law reaches (−10, 10): final distance {correct['distance']:.1e} m, heading error "
-                   f"{correct['heading_deg']:.1e}°, within {NEAR:g} m after {_show(correct['near_time'])} s (goal "
+                   f"{correct['heading_deg']:.1e}°, within {NEAR:g} m after {show(correct['near_time'])} s (goal "
                    f"origin: {result.record('polar', 'origin')['distance']:.1e} m). The failure appears only with an "
                    f"implementation error: without goal translation the robot parks at the origin, "
                    f"{untranslated['distance']:.2f} m from (−10, 10); with the distance measured from the world origin "
@@ -331,16 +341,14 @@ def _eq_5_11(result: PostureStudyResult) -> Finding:
 
 
 def _spec_agreement(result: PostureStudyResult) -> Finding:
-    robust = [c for c in result.comparisons if not c.spec.sensitive]
-    sensitive = [c for c in result.comparisons if c.spec.sensitive]
-    missing = [c for c in result.comparisons if not c.agrees]
+    agreement = Agreement.of(result.comparisons)
+    missing = agreement.missing
     reasons = ["QUICK MODE: the coarser grid moves the slow time-varying runs."] if result.quick and missing else []
     if any(c.case.startswith("polar") and c.quantity == "heading_deg" for c in missing):
         reasons.append(_polar_stop_note(result))
     return Finding("Spec reference numbers (follower-posture.md §6 (d))", "holds" if not missing else "partly",
-                   f"{sum(c.agrees for c in robust)} of {len(robust)} robust and {sum(c.agrees for c in sensitive)} of "
-                   f"{len(sensitive)} integration-sensitive values reproduced"
-                   + ("; not " + ", ".join(f"{c.case} {c.quantity} (ours {_show(c.ours)}, spec {c.spec.text})"
+                   agreement.counts()
+                   + ("; not " + ", ".join(f"{c.case} {c.quantity} (ours {show(c.ours)}, spec {c.spec.text})"
                                            for c in missing) if missing else "") + ".", " ".join(reasons))
 
 
@@ -352,7 +360,7 @@ def _polar_stop_note(result: PostureStudyResult) -> str:
         tolerance = run.formation.leaders[0].controller.gains["tolerance"]
         stop = time_within(run.t, goal_distance(run, pose), tolerance)
         heading = abs(math.degrees(float(wrap(run.trajectory("theta")[0, -1] - pose[2]))))
-        parts.append(f"goal {goal} at t = {_show(stop)} s with heading error {heading:.2g}°")
+        parts.append(f"goal {goal} at t = {show(stop)} s with heading error {heading:.2g}°")
     return (f"the polar law stops (v = ω = 0) once the distance is below its tolerance "
             f"({tolerance:g} m), freezing the heading error it has then: " + "; ".join(parts)
             + ". The spec's reference run does not state its stop rule.")
@@ -365,10 +373,10 @@ LAW_COLORS = {"time-varying": "tab:blue", "polar": "tab:orange", "dynamic-feedba
 
 def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
     """Figures 5.46–5.51 in one: paths to each goal, distance to the goal, heading."""
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import legend_below, plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 10))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.06, top=0.92, wspace=0.2, hspace=0.28)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 11))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.92, wspace=0.2, hspace=0.42)
     ax_origin, ax_other, ax_distance, ax_heading = axes.ravel()
     for ax, goal in ((ax_origin, "origin"), (ax_other, "(-10, 10)")):
         for law in LAWS:
@@ -380,15 +388,15 @@ def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
         ax.plot(*pose[:2], "r*", ms=16, label=f"goal ({pose[0]:g}, {pose[1]:g}), heading 0")
         ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Paths to the goal ({pose[0]:g}, {pose[1]:g})")
         ax.set_aspect("equal", adjustable="datalim")
-        ax.legend(fontsize=8, loc="lower right")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.1), ncol=2, frameon=False)
     for law in LAWS:
-        for goal, style in (("origin", "-"), ("(-10, 10)", "--")):
+        for goal, style in (("origin", "-"), ("(-10, 10)", (0, (5, 2)))):
             run = result.runs[case_key(law, goal)]
             distance = np.maximum(goal_distance(run, GOALS[goal]), 1e-12)
-            ax_distance.semilogy(run.t, distance, color=LAW_COLORS[law], ls=style, lw=1.3,
+            ax_distance.semilogy(run.t, distance, color=LAW_COLORS[law], ls=style, lw=2.2 if goal == "origin" else 1.3,
                                  label=f"{LABELS[law]}, goal {goal}")
             ax_heading.plot(run.t, np.degrees(wrap(run.trajectory("theta")[0])), color=LAW_COLORS[law], ls=style,
-                            lw=1.3, label=f"{LABELS[law]}, goal {goal}")
+                            lw=2.2 if goal == "origin" else 1.3, label=f"{LABELS[law]}, goal {goal}")
     ax_distance.set(xlabel="time t (s)", ylabel="distance to the goal (m, log scale; floor 1e-12)",
                     title="Distance to the goal", ylim=(1e-12, 50))
     ax_heading.axhline(0.0, color="k", lw=0.8)
@@ -396,23 +404,54 @@ def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
                    ylim=(-190, 190), yticks=range(-180, 181, 60))
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-    ax_distance.legend(fontsize=8, loc="center right")
-    ax_heading.legend(fontsize=8, loc="best")
+    legend_below(fig, ax_distance, ncol=6, fontsize=8.5)
     fig.suptitle("Posture stabilization from (−10, −10): time-varying, polar and dynamic FL laws (60 s)", fontsize=14)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
+def plot_posture_inputs(result: PostureStudyResult, path: Path) -> None:
+    """Small multiples, one row per law: the applied v and ω to each goal (solid: (0, 0),
+    dashed: (−10, 10)); start-up spikes are clipped and named above the panel."""
+    from nonholo.studies.plots import legend_below, peak_note, plt, robust_range
+
+    fig, axes = plt.subplots(len(LAWS), 2, figsize=(13, 9.5), sharex=True, sharey="col", squeeze=False)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.9, wspace=0.15, hspace=0.55)
+    for c, (field, unit, kind) in enumerate((("v", "m/s", "applied v"), ("omega", "rad/s", "applied ω"))):
+        series = {(law, goal): result.runs[case_key(law, goal)].trajectory(field)[0] for law in LAWS for goal in GOALS}
+        low, high = robust_range(list(series.values()))
+        for r, law in enumerate(LAWS):
+            ax = axes[r, c]
+            notes = []
+            for goal, style in (("origin", "-"), ("(-10, 10)", (0, (5, 2)))):
+                run = result.runs[case_key(law, goal)]
+                ax.plot(run.t, series[(law, goal)], color=LAW_COLORS[law], ls=style, lw=2.2 if goal == "origin" else 1.2,
+                        label=f"goal {goal}")
+                note = peak_note(run.t, series[(law, goal)], low, high, unit)
+                if note:
+                    notes.append(f"goal {goal}: {note}")
+            ax.set_title(f"{LABELS[law]}: {kind} ({unit})" + "".join(f"\n{n}" for n in notes), fontsize=9,
+                         color="#a31515" if notes else "black")
+            ax.grid(True, alpha=0.3)
+        axes[0, c].set_ylim(low, high)
+        axes[-1, c].set_xlabel("time t (s)")
+    legend_below(fig, axes[0, 0], ncol=2)
+    fig.suptitle("Posture stabilization: what each law applies (solid: goal (0, 0); dashed: goal (−10, 10))",
+                 fontsize=13)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import legend_below, plt
 
     goal = GOALS["(-10, 10)"]
     runs = {"correct (goal frame)": result.runs[case_key("polar", "(-10, 10)")],
             "goal not translated (parks at the origin)": result.runs[case_key("polar", "origin")],
             "distance from the world origin": result.runs["polar, distance from the world origin"]}
     colors = ("tab:orange", "tab:gray", "tab:purple")
-    fig, (ax_path, ax_distance) = plt.subplots(1, 2, figsize=(13, 5.5))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.11, top=0.86, wspace=0.22)
+    fig, (ax_path, ax_distance) = plt.subplots(1, 2, figsize=(13, 6))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.2, top=0.86, wspace=0.22)
     for (label, run), color in zip(runs.items(), colors):
         ax_path.plot(run.trajectory("x")[0], run.trajectory("y")[0], color=color, lw=1.6, label=label)
         ax_distance.semilogy(run.t, np.maximum(goal_distance(run, goal), 1e-12), color=color, lw=1.4, label=label)
@@ -422,9 +461,9 @@ def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
     ax_path.set_aspect("equal", adjustable="datalim")
     ax_distance.set(xlabel="time t (s)", ylabel="distance to (−10, 10) (m, log scale)", ylim=(1e-12, 50),
                     title="Distance to the goal (−10, 10)")
-    for ax, where in ((ax_path, "upper right"), (ax_distance, "center right")):
+    for ax in (ax_path, ax_distance):
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=9, loc=where)
+    legend_below(fig, ax_path, ncol=5, fontsize=9)
     fig.suptitle("Polar law, goal (−10, 10): the thesis's “does not converge” needs an implementation error",
                  fontsize=13)
     fig.savefig(path, dpi=100)
@@ -435,7 +474,13 @@ def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
 
 def run_posture(options: StudyOptions) -> PostureStudyResult:
     started = time.perf_counter()
-    runs = simulate_cases(options.quick)
+    cases = all_cases(options.quick)
+    runs = {}
+    with options.progress_for("study posture", len(cases), "runs") as progress:
+        for key, case in cases.items():
+            progress.start(key)
+            runs[key] = simulate_formation(case)
+            progress.done()
     return PostureStudyResult(runs, options.quick, time.perf_counter() - started)
 
 
@@ -443,4 +488,5 @@ STUDY = Study(
     name="posture", title=PostureStudyResult.title,
     summary="time-varying, polar and dynamic-FL posture laws from (-10,-10) to (0,0) and (-10,10); thesis §5.7-5.8",
     run=run_posture,
+    order=3,
 )

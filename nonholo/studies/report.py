@@ -1,37 +1,90 @@
-"""The report: ``index.html`` with one section per study, plus HTML helpers studies use."""
+"""The report: ``index.html`` with one section per study (in the studies' ``order``: the
+Chapter 5 leader tables first), a table of contents with sub-navigation, an appendix that
+explains every specification section and erratum the report cites, plus the HTML helpers
+the studies use.
+
+Numbers are never broken across lines: numeric table cells and scientific numbers in the
+text are kept on one line (CSS ``white-space: nowrap``).
+"""
 from __future__ import annotations
 
 import html
 import json
+import re
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 from nonholo.studies.base import StudyOptions, StudyResult, discover
+from nonholo.studies.progress import Progress
 
 _STYLE = """
-body { font-family: system-ui, sans-serif; max-width: 1200px; margin: 2em auto; padding: 0 1em; color: #222; }
-table { border-collapse: collapse; margin: 0.6em 0 1.4em; font-size: 0.88em; }
-th, td { border: 1px solid #bbb; padding: 0.25em 0.55em; text-align: right; }
-th { background: #eee; } td:first-child, th:first-child { text-align: left; }
-caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3em; }
-figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
-figcaption { font-size: 0.9em; color: #444; }
+body { font-family: system-ui, sans-serif; margin: 0; color: #222; line-height: 1.45; }
+nav#toc { position: fixed; top: 0; left: 0; bottom: 0; width: 14.5rem; overflow-y: auto; box-sizing: border-box;
+          padding: 1rem 0.8rem; background: #f5f6f7; border-right: 1px solid #d8d8d8; font-size: 0.88em; }
+nav#toc h2 { font-size: 1.05em; margin: 0 0 0.5em; }
+nav#toc ol { padding-left: 1.2em; margin: 0.2em 0; } nav#toc li { margin: 0.15em 0; }
+nav#toc ol ol { font-size: 0.95em; list-style: lower-alpha; }
+main { margin-left: 14.5rem; max-width: 1200px; padding: 0.5rem 1.2rem 4rem; }
+@media (max-width: 1000px) { nav#toc { position: static; width: auto; border: 0; } main { margin-left: 0; } }
+h1 { font-size: 1.6em; border-bottom: 2px solid #ccc; padding-bottom: 0.2em; margin-top: 1.6em; }
+h2 { font-size: 1.25em; margin-top: 1.4em; } h1, h2, h3, dt, tr { scroll-margin-top: 0.5em; }
+.scroll { overflow-x: auto; margin: 0.6em 0 1.4em; }
+table { border-collapse: collapse; font-size: 0.82em; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.42em; text-align: right; vertical-align: top; }
+th { background: #eee; } td:first-child, th:first-child { text-align: left; } td.text { text-align: left; }
+th.group { text-align: center; background: #e2e6ea; } td:first-child { white-space: nowrap; }
+td.num, .nb { white-space: nowrap; font-variant-numeric: tabular-nums; } td.nw { white-space: nowrap; }
+caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3em; max-width: 60em; }
+figure { margin: 1em 0 1.6em; } figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 0.9em; color: #444; max-width: 60em; }
+li { margin: 0.35em 0; }
 .holds { color: #176b1b; font-weight: 600; } .fails { color: #a31515; font-weight: 600; }
 .partly { color: #8a5a00; font-weight: 600; } .note { color: #555; font-size: 0.92em; }
+a.cite { text-decoration: none; border-bottom: 1px dotted #36c; }
+dl.cites dt { font-weight: 600; margin-top: 0.6em; } dl.cites dd { margin-left: 1.2em; max-width: 60em; }
+table.errata td, table.errata th { text-align: left; } table.errata td.num { text-align: right; }
 """
+
+# A cell that is a number (with optional sign, exponent, unit or ratio) is kept on one line.
+_NUMERIC = re.compile(r"^[−–+-]?(\d[\d.,]*(e[−+-]?\d+)?|inf|nan)\s?(%|°|×|s|m|m/s|rad/s)?$|^[–-]$|^\d+/\d+$",
+                      re.IGNORECASE)
+SHORT_CELL = 16  # characters: shorter text cells are never wrapped
+_SCIENTIFIC = re.compile(r"(?<![\w.])([−-]?\d+(?:\.\d+)?(?:e|×10\^?)[−+-]?\d+)")
 
 
 def escape(value) -> str:
     return html.escape(str(value), quote=True)
 
 
-def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "") -> str:
-    """A table; cells are escaped text (numbers formatted by the caller)."""
+def numeric(text: str) -> bool:
+    """Whether a table cell's text is a number (kept on one line in the report)."""
+    return bool(_NUMERIC.match(text.strip()))
+
+
+def cell_class(text: str) -> str:
+    """"num" for a number (right-aligned, one line), "text nw" for a short text such as a
+    point "(−10, 10)" (kept on one line), "text" otherwise."""
+    if numeric(text):
+        return "num"
+    return "text nw" if len(text) <= SHORT_CELL else "text"
+
+
+def html_table(header: Sequence[str], rows: Iterable[Sequence], caption: str = "",
+               groups: Sequence[tuple[str, int]] | None = None) -> str:
+    """A table; cells are escaped text (numbers formatted by the caller; numeric cells get
+    ``class="num"``: never broken across lines). ``groups``: (label, columns spanned) of an
+    extra header row above ``header``. Wide tables scroll sideways."""
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
-    body = "\n".join("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in row) + "</tr>" for row in rows)
+    if groups:
+        top = "".join(f'<th colspan="{span}" class="group">{escape(label)}</th>' for label, span in groups)
+        head = f"<tr>{top}</tr><tr>{head}</tr>"
+    else:
+        head = f"<tr>{head}</tr>"
+    body = "\n".join("<tr>" + "".join(f'<td class="{cell_class(str(c))}">{escape(c)}</td>' for c in row) + "</tr>"
+                     for row in rows)
     cap = f"<caption>{escape(caption)}</caption>" if caption else ""
-    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>\n{body}\n</tbody></table>"
+    return f'<div class="scroll"><table>{cap}<thead>{head}</thead><tbody>\n{body}\n</tbody></table></div>'
 
 
 def html_figure(src: str, caption: str) -> str:
@@ -43,39 +96,113 @@ def html_list(items: Iterable[str]) -> str:
     return "<ul>" + "".join(f"<li>{item}</li>" for item in items) + "</ul>"
 
 
-def write_report(results: Sequence[StudyResult], out_dir: Path) -> Path:
+def decorate(fragment: str, spec_file: str) -> str:
+    """Keep scientific numbers in the text on one line and link citations to the appendix."""
+    from nonholo.studies.citations import link_citations
+
+    parts = re.split(r"(<[^>]+>)", fragment)
+    for i, part in enumerate(parts):
+        if part and not part.startswith("<"):
+            parts[i] = _SCIENTIFIC.sub(r'<span class="nb">\1</span>', part)
+    return link_citations("".join(parts), spec_file)
+
+
+def _contents(section_id: str, title: str, fragment: str) -> str:
+    """A contents entry for a section and its ``<h2 id=…>`` sub-sections."""
+    subs = re.findall(r'<h2 id="([^"]+)">(.*?)</h2>', fragment)
+    inner = "".join(f'<li><a href="#{i}">{re.sub(r"<[^>]+>", "", t)}</a></li>' for i, t in subs)
+    return f'<li><a href="#{escape(section_id)}">{escape(title)}</a>' + (f"<ol>{inner}</ol>" if inner else "") + "</li>"
+
+
+def write_report(results: Sequence[StudyResult], out_dir: Path, options: StudyOptions | None = None) -> Path:
     """Write every study's figures and data under ``out_dir/<study>/`` and the page
-    ``out_dir/index.html``; returns the page's path."""
+    ``out_dir/index.html`` (contents, one section per study, appendix, run times); returns
+    the page's path. Progress per study section if ``options.progress``."""
+    from nonholo.studies.citations import appendix_html, find_citations
+
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    sections, summary = [], {}
-    for result in results:
-        folder = out_dir / result.name
-        folder.mkdir(parents=True, exist_ok=True)
-        files = result.write_data(folder)
-        links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>' for f in files)
-        sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
-                        f'<p class="note">Data: {links}. Run time {result.elapsed_s:.1f} s.</p>'
-                        f"{result.html_section(folder)}</section>")
-        summary[result.name] = {"title": result.title, "files": [f.relative_to(out_dir).as_posix() for f in files]}
-    contents = html_list(f'<a href="#{escape(r.name)}">{escape(r.title)}</a>' for r in results)
-    page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>nonholo studies</title>"
-            f"<style>{_STYLE}</style></head><body><p class=\"note\">nonholo study report, generated "
-            f"{escape(time.strftime('%Y-%m-%d %H:%M'))}</p>{contents}\n" + "\n".join(sections) + "</body></html>\n")
+    sections, contents, summary, citations, times = [], [], {}, set(), []
+    progress = (options.progress_for("report", len(results), "sections") if options is not None
+                else Progress("report", len(results), "off"))
+    with progress:
+        for result in results:
+            progress.start(f"{result.name}: figures and data")
+            started = time.perf_counter()
+            folder = out_dir / result.name
+            folder.mkdir(parents=True, exist_ok=True)
+            files = result.write_data(folder)
+            spec_file = getattr(result, "spec_file", "leader.md")
+            body = result.html_section(folder)
+            citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
+            body = decorate(body, spec_file)
+            drawn = time.perf_counter() - started
+            times.append((result, drawn))
+            links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>'
+                               for f in files)
+            sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
+                            f'<p class="note">Data: {links}. Simulations and statistics took {result.elapsed_s:.1f} s '
+                            f"(wall time), figures and data files {drawn:.1f} s.</p>{body}</section>")
+            contents.append(_contents(result.name, result.title, body))
+            summary[result.name] = {"title": result.title, "elapsed_s": result.elapsed_s, "report_s": drawn,
+                                    "files": [f.relative_to(out_dir).as_posix() for f in files]}
+            progress.done()
+    appendix = appendix_html(citations)
+    sections.append(f'<section id="appendix"><h1>Appendix: the specification sections and errata cited</h1>'
+                    f"{appendix}</section>")
+    contents.append(_contents("appendix", "Appendix: specification sections and errata cited", ""))
+    quick = any(getattr(r, "quick", False) for r in results)
+    rows = "".join(f'<tr><td class="text"><a href="#{escape(r.name)}">{escape(r.name)}</a></td>'
+                   f'<td class="num">{r.elapsed_s:.1f} s</td><td class="num">{drawn:.1f} s</td></tr>'
+                   for r, drawn in times)
+    header = ('<header><h1 style="margin-top:0.6em">nonholo study report</h1>'
+              f'<p class="note">Generated {escape(time.strftime("%Y-%m-%d %H:%M"))} by <code>nonholo study</code>'
+              + (" in QUICK MODE (coarser grids: not the canonical numbers)" if quick else "")
+              + ". Each section gives the differences from the thesis first (verdicts computed from the numbers: "
+              '<span class="holds">holds</span>, <span class="partly">partly</span>, <span class="fails">fails</span>, '
+              "note), then the tables and the figures. Citations such as “spec §5.3” or “erratum 19” link to the "
+              "appendix, which explains them.</p>"
+              f'<div class="scroll"><table><caption>Wall times</caption><thead><tr><th>study</th>'
+              f"<th>simulations and statistics</th><th>figures and data files</th></tr></thead><tbody>{rows}"
+              "</tbody></table></div></header>")
+    nav = f'<nav id="toc"><h2>Contents</h2><ol>{"".join(contents)}</ol></nav>'
+    page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>nonholo studies</title>"
+            f"<style>{_STYLE}</style></head><body>{nav}<main>{header}\n" + "\n".join(sections)
+            + "</main></body></html>\n")
     path = out_dir / "index.html"
     path.write_text(page, encoding="utf-8")
     (out_dir / "studies.json").write_text(json.dumps(summary, indent=2))
     return path
 
 
-def run_studies(names: Sequence[str] | None, options: StudyOptions) -> tuple[list[StudyResult], Path]:
-    """Run the named studies (all if ``names`` is empty or None) and write the report."""
+def chosen_studies(names: Sequence[str] | None) -> list:
+    """The named studies (all if ``names`` is empty or None), in report order."""
     studies = discover()
-    chosen = list(names) if names else list(studies)
-    unknown = [n for n in chosen if n not in studies]
+    unknown = [n for n in names or () if n not in studies]
     if unknown:
         from nonholo.errors import NonholoInputError
 
         raise NonholoInputError(f"unknown study {unknown[0]!r} (studies: {', '.join(studies)})")
-    results = [studies[name].run(options) for name in chosen]
-    return results, write_report(results, options.out_dir)
+    chosen = list(dict.fromkeys(names)) if names else list(studies)
+    return sorted((studies[name] for name in chosen), key=lambda s: (s.order, s.name))
+
+
+def run_each(names: Sequence[str] | None, options: StudyOptions,
+             on_result: Callable[[StudyResult], None] | None = None) -> list[StudyResult]:
+    """Run the named studies in report order; ``on_result`` sees each result as soon as its
+    study finishes (the command prints its tables then)."""
+    results = []
+    for study in chosen_studies(names):
+        result = study.run(options)
+        results.append(result)
+        if on_result is not None:
+            on_result(result)
+    return results
+
+
+def run_studies(names: Sequence[str] | None, options: StudyOptions,
+                on_result: Callable[[StudyResult], None] | None = None) -> tuple[list[StudyResult], Path]:
+    """Run the named studies (all if ``names`` is empty or None) and write the report."""
+    results = run_each(names, options, on_result)
+    return results, write_report(results, options.out_dir, options)

@@ -23,9 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nonholo import Follower, Robot, Scenario, simulate
 from nonholo.errors import NonholoInputError
-from nonholo.sim.scenario import Follower, Robot, Scenario
-from nonholo.sim.simulator import simulate
 
 METRICS = ("mean", "rms", "max", "final")
 
@@ -147,6 +146,33 @@ class SweepResult:
             raise ValueError("a trend is defined for one-gain sweeps only")
         return classify_trend(self.values)
 
+    def best(self) -> dict[str, float]:
+        """The grid point with the lowest metric: {gain: value}."""
+        index = np.unravel_index(int(np.argmin(self.values)), self.values.shape)
+        return {a.name: float(a.values[i]) for a, i in zip(self.axes, index)}
+
+    def best_on_edge(self) -> list[str]:
+        """The gains whose best value is the first or last of its grid (the optimum may lie
+        outside the grid: extend it that way). Empty if the best point is inside (or the axis
+        has a single value)."""
+        index = np.unravel_index(int(np.argmin(self.values)), self.values.shape)
+        return [a.name for a, i in zip(self.axes, index) if a.values.size > 1 and i in (0, a.values.size - 1)]
+
+    def edge_warning(self) -> str | None:
+        """A one-line warning if the best point lies on the grid's edge, else None."""
+        edges = self.best_on_edge()
+        if not edges:
+            return None
+        best, parts = self.best(), []
+        for name in edges:
+            side = "lowest" if best[name] == self._axis(name).values[0] else "highest"
+            parts.append(f"{name} = {best[name]:g}, the {side} value swept")
+        return (f"warning: the lowest {self.metric} error is on the edge of the grid ({'; '.join(parts)}): the "
+                "optimum may lie outside it; extend the grid that way")
+
+    def _axis(self, name: str) -> GainAxis:
+        return next(a for a in self.axes if a.name == name)
+
     def rows(self) -> list[list[float]]:
         """One row per grid point: the gain values, then every error statistic."""
         grids = np.meshgrid(*(a.values for a in self.axes), indexing="ij")
@@ -167,6 +193,7 @@ class SweepResult:
         out = {"scenario": self.scenario, "robot": self.robot, "controller": self.controller, "metric": self.metric,
                "axes": {a.name: a.values.tolist() for a in self.axes}, "points": self.points,
                "elapsed_s": self.elapsed_s, "errors": {s: self.errors[s].tolist() for s in _STATISTICS}}
+        out["best"] = {"point": self.best(), "value": float(self.values.min()), "on_edge": self.best_on_edge()}
         if len(self.axes) == 1:
             trend = self.trend()
             out["trend"] = {"word": trend.word, "runs": list(trend.runs)}
@@ -232,7 +259,7 @@ def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> lis
     config = base.controller
     fixed = dict(config.gains)
     if config.xi0 is not None:
-        fixed[config.controller.initial_compensator] = config.xi0
+        fixed[config.controller.initial_gain] = config.xi0
     for alias, targets in config.controller.aliases.items():
         if alias in names:
             for target in targets:

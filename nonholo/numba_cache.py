@@ -1,0 +1,117 @@
+"""Where numba keeps nonholo's compiled code: a per-user cache directory, never the
+installed package.
+
+numba's default (``cache=True``) writes ``.nbi``/``.nbc`` files into ``__pycache__`` beside
+the source, i.e. into ``site-packages/nonholo/`` after ``pip install .``. Those files
+survive ``pip uninstall``; the folder they leave behind is then an implicit namespace
+package that hides a later editable install (``ImportError: cannot import name
+'__version__' from 'nonholo' (unknown location)``). So nonholo's compiled code goes to
+
+* ``$NUMBA_CACHE_DIR`` if the user set it (numba's own rule, applied to everything), else
+* ``$XDG_CACHE_HOME/nonholo/numba``, or ``~/.cache/nonholo/numba`` (``%LOCALAPPDATA%`` on
+  Windows, ``~/Library/Caches`` on macOS), one sub-folder per source folder (numba names it
+  after the folder and a hash of its absolute path, so two checkouts never share files),
+  else, if that cannot be written, a per-user folder in the temporary directory.
+
+How: numba asks a list of *cache locators*, in order, where a function's cache lives; the
+first that accepts the function wins. ``install()`` (run by ``import nonholo``, before any
+nonholo module compiles anything) inserts ``PackageCacheLocator`` right after numba's
+``$NUMBA_CACHE_DIR`` locator. It accepts only functions whose source file lies inside this
+package, so the user's own ``cache=True`` functions keep numba's defaults, and it works
+whether or not numba was imported first: the locator is chosen when a function is
+decorated, which happens when nonholo's modules are imported, always after
+``nonholo/__init__`` has run. (Setting ``numba.config.CACHE_DIR`` instead would also move
+every other library's caches; setting ``os.environ`` would leak into child processes.) If
+``$NUMBA_CACHE_LOCATOR_CLASSES`` is set, numba uses exactly that list and we do not
+interfere.
+
+>>> from nonholo.numba_cache import cache_dir
+>>> "nonholo" in str(cache_dir()) or bool(__import__("os").environ.get("NUMBA_CACHE_DIR"))
+True
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def user_cache_root() -> Path:
+    """The platform's per-user cache folder (``$XDG_CACHE_HOME`` or ``~/.cache`` on Linux)."""
+    if sys.platform == "win32":
+        return Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache"
+
+
+def cache_dir() -> Path:
+    """Where nonholo's compiled code is cached (see the module docstring)."""
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    if user:
+        return Path(user)
+    return user_cache_root() / "nonholo" / "numba"
+
+
+def _fallback_dir() -> Path:
+    import getpass
+
+    try:
+        user = getpass.getuser()
+    except Exception:  # no user name in the environment or the password database
+        user = str(getattr(os, "getuid", lambda: "user")())
+    return Path(tempfile.gettempdir()) / f"nonholo-numba-{user}"
+
+
+def _make_locator():
+    from numba.core import caching, config
+
+    class PackageCacheLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
+        """numba cache locator: nonholo's functions cache under ``cache_dir()``."""
+
+        root: Path | None = None  # chosen on first use: cache_dir(), else the fallback
+
+        def __init__(self, py_func, py_file):
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            self._cache_path = str(self.root / self.get_suitable_cache_subpath(py_file))
+
+        def get_cache_path(self):
+            return self._cache_path
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if config.CACHE_DIR:  # the user's choice: numba's own locator (listed before us) handles it
+                return None
+            try:
+                if not Path(py_file).resolve().is_relative_to(PACKAGE_DIR):
+                    return None
+            except (OSError, ValueError):
+                return None
+            roots = [cls.root] if cls.root is not None else [cache_dir(), _fallback_dir()]
+            for root in roots:
+                cls.root = root
+                locator = super().from_function(py_func, py_file)  # None if the folder cannot be written
+                if locator is not None:
+                    return locator
+            cls.root = None
+            return None
+
+    return PackageCacheLocator
+
+
+def install() -> None:
+    """Make numba cache nonholo's compiled code under ``cache_dir()`` (idempotent)."""
+    try:
+        from numba.core import caching
+        impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # renamed in numba 0.61
+        locators = impl._locator_classes
+    except (ImportError, AttributeError):  # a numba without this mechanism: keep its defaults
+        return
+    if any(getattr(c, "__name__", "") == "PackageCacheLocator" for c in locators):
+        return
+    locators.insert(1 if locators and "UserProvided" in locators[0].__name__ else 0, _make_locator())

@@ -1,0 +1,54 @@
+"""Compiled code is cached per user, never inside the installed package (issue: a leftover
+``site-packages/nonholo/__pycache__`` hid a later editable install)."""
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PROBE = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    import numba  # imported before nonholo on purpose
+    from numba import njit
+    import nonholo
+    from nonholo import numerics
+    sys.path.insert(0, sys.argv[2])
+    import user_module
+    print(numerics._sin_cos_arrays._cache._cache_path)
+    print(user_module.double._cache._cache_path)
+""")
+
+
+def _probe(tmp_path, **env):
+    user = tmp_path / "user"
+    user.mkdir(exist_ok=True)
+    (user / "user_module.py").write_text("from numba import njit\n\n@njit(cache=True)\ndef double(x):\n    return 2 * x\n")
+    environment = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    environment.update(env)
+    out = subprocess.run([sys.executable, "-c", PROBE, str(ROOT), str(user)], env=environment, check=True,
+                         capture_output=True, text=True).stdout.split()
+    return Path(out[0]), Path(out[1])
+
+
+def test_nonholo_caches_under_the_user_cache_folder(tmp_path):
+    ours, theirs = _probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    assert ours.parent == tmp_path / "cache" / "nonholo" / "numba"
+    assert ours.name.startswith("nonholo_")
+    assert not ours.is_relative_to(ROOT)
+    # other libraries' functions keep numba's own default
+    assert theirs == tmp_path / "user" / "__pycache__"
+
+
+def test_numba_cache_dir_is_respected(tmp_path):
+    ours, theirs = _probe(tmp_path, XDG_CACHE_HOME=str(tmp_path / "cache"), NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    assert ours.parent == tmp_path / "numba" and theirs.parent == tmp_path / "numba"
+
+
+def test_unwritable_cache_folder_falls_back_outside_the_package(tmp_path):
+    blocked = tmp_path / "file"
+    blocked.write_text("not a folder")
+    ours, _ = _probe(tmp_path, XDG_CACHE_HOME=str(blocked))
+    assert not ours.is_relative_to(ROOT) and "nonholo-numba-" in str(ours)
