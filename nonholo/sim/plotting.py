@@ -123,15 +123,14 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
     ax_err.set(xlabel="time (s)", ylabel="|error|", title="Formation output errors" if formation.followers else "Goal distance")
     ax_v.set(xlabel="time (s)", ylabel="v (m/s)", title="Driving speed demands")
     ax_w.set(xlabel="time (s)", ylabel=r"$\omega$ (rad/s)", title="Turn-rate demands")
-    for ax in (ax_v, ax_w):
-        peak = np.abs(ax.lines[0].get_ydata()).max() if ax.lines else 1.0
-        steady = max(np.percentile(np.abs(np.concatenate([ln.get_ydata() for ln in ax.lines])), 99), 1e-3)
-        if peak > 20 * steady:   # a start transient would flatten everything else
-            ax.set_ylim(-3 * steady, 3 * steady)
-            ax.set_title(ax.get_title() + " (clipped; peaks in JSON)")
+    robust_limits(ax_v, [v], "m/s", "Driving speed demands")    # start-up spikes clipped, peak named
+    robust_limits(ax_w, [omega], "rad/s", "Turn-rate demands")
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+    if ax_err.lines:
+        ax_err.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, frameon=False)
+    fig.legend(*ax_path.get_legend_handles_labels(), loc="outside lower center", ncol=min(4, len(formation.robots) + 1),
+               fontsize=8, frameon=False)
     fig.suptitle(f"{formation.name}: {len(formation.robots)} robots, {t[-1]:.5g} s, dt = {formation.dt:g} s")
     if path is not None:
         fig.savefig(path, dpi=110)
