@@ -171,7 +171,7 @@ def test_encoder_follows_conventions():
                          conversation_id=("formation", 7), user_params={"note": "two words"})
     text = encode_text(message)
     assert text.startswith("(request\n :sender (agent-identifier :name a@p)\n :receiver (set ")
-    assert ':content #10"C:\\dir "x"' in text          # backslash -> byte-length string
+    assert ':content "C:\\dir \\"x\\""' in text        # backslash stands for itself
     assert ":reply-by 20250101T120005123Z" in text      # UTC, Z, milliseconds
     assert ':X-note "two words"' in text and ":conversation-id (formation 7)" in text
     assert encode_text(ACLMessage("inform", content="  padded  ")).count("  padded  ") == 1
