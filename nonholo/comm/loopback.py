@@ -38,10 +38,17 @@ CONVERSATION = "formation-7"
 STARTUP_TIMEOUT_S = 20.0
 
 
+def agent_name(sender_id: int) -> str:
+    """The agent of each key/sender id: 0 is the leader, i > 0 follower i."""
+    return LEADER.name if sender_id == 0 else f"f{sender_id}@fleet"
+
+
 def _channel(keys: dict[int, bytes], my_id: int) -> SecureChannel:
-    # Each key only authenticates its own sender id, so a follower cannot forge the leader.
+    # Each key only authenticates its own sender id, so a follower cannot forge the leader,
+    # and each sender id may only speak as its own agent (:sender bound to the envelope).
     return SecureChannel(Sealer(keys[my_id], key_id=my_id, sender_id=my_id),
-                         Opener(keys, key_senders={k: frozenset({k}) for k in keys}))
+                         Opener(keys, key_senders={k: frozenset({k}) for k in keys}),
+                         senders={k: agent_name(k) for k in keys})
 
 
 async def _open_transport(kind: str, name: str, port: int, leader: bool) -> Transport:
@@ -61,7 +68,7 @@ async def _open_transport(kind: str, name: str, port: int, leader: bool) -> Tran
 # -- follower (child process) -----------------------------------------------------------
 async def run_follower(kind: str, port: int, index: int, count: int, timeout: float) -> dict:
     keys = load_key_env()
-    me = AgentID(f"f{index}@fleet")
+    me = AgentID(agent_name(index))
     channel = _channel(keys, index)
     transport = await _open_transport(kind, me.name, port, leader=False)
     conversation = Conversation(SUBSCRIBE_PROTOCOL, CONVERSATION)
