@@ -34,6 +34,7 @@ HEADER = struct.Struct(">2sBBHHIQQI")
 TAG_SIZE = 32
 OVERHEAD = HEADER.size + TAG_SIZE
 RETIRED_EPOCHS_KEPT = 16
+MAX_SEQ = (1 << 64) - 1
 
 
 def wall_clock_ms() -> int:
@@ -66,6 +67,9 @@ class Sealer:
         self._clock_ms = clock_ms
 
     def seal(self, payload: bytes) -> bytes:
+        if self.seq >= MAX_SEQ:  # sequence space used up: start a new epoch, as a reboot would
+            self.epoch = (self.epoch + 1 + secrets.randbelow(0xFFFFFFFF)) & 0xFFFFFFFF
+            self.seq = 0
         self.seq += 1
         header = HEADER.pack(MAGIC, VERSION, 0, self.key_id, self.sender_id, self.epoch,
                              self.seq, self._clock_ms(), len(payload))
