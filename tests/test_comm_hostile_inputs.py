@@ -9,13 +9,14 @@ import os
 import sys
 import time
 import tracemalloc
+from datetime import timedelta
 
 import pytest
 from hypothesis import given, settings
 
 from nonholo.cli import main
 from nonholo.comm import (
-    ACLEncodeError, ACLMessage, ACLParseError, AgentID, Opener, ReplayedMessage, Sealer,
+    ACLEncodeError, ACLMessage, ACLParseError, AgentID, Opener, RelativeTime, ReplayedMessage, Sealer,
     SecureChannel, SenderMismatch, decode, encode,
 )
 from nonholo.comm import acl_lexical as lex
@@ -125,6 +126,16 @@ def test_words_the_grammar_allows_are_read():
     assert message.conversation_id == '+12"x"'  # starts like a Word: runs to the space
     # A number stops at a quote, as a longest-match lexer of the grammar would.
     assert decode(b'(inform :X-n (12"3"))').user_params["n"] == (12, "3")
+
+
+def test_every_date_time_form_of_the_standard_is_read():
+    values = decode(b"(inform :X-t (20250101T120000000A 20250101T120000000y 20250101T120000000J "
+                    b"20250101T120000000z +00000001T000000000Z))").user_params["t"]
+    assert [v.utcoffset() for v in values[:2]] == [timedelta(hours=1), timedelta(hours=-12)]
+    assert values[2].tzinfo is None and values[3].utcoffset() == timedelta(0)
+    assert values[4] == RelativeTime(False, days=1)
+    with pytest.raises(ACLParseError, match="UTC"):
+        decode(b"(inform :reply-by 00010101T000000000A)")  # 0000-12-31 in UTC
 
 
 @pytest.mark.parametrize("text,expected", [

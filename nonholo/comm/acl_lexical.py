@@ -6,7 +6,7 @@ nested alternation that could backtrack, so hostile input cannot make them slow.
 from __future__ import annotations
 
 import re
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 
 from nonholo.comm.message import RelativeTime
 
@@ -79,18 +79,29 @@ def is_portable_word(text: str) -> bool:
     return PORTABLE_WORD.fullmatch(text) is not None and is_word(text)
 
 
+# The one-letter time zones (the military/nautical letters of ISO 8601 practice): Z is UTC,
+# A..M (no J) are 1..12 hours east, N..Y 1..12 hours west, J is the observer's local time.
+_ZONE_HOURS = {**{letter: hours + 1 for hours, letter in enumerate("ABCDEFGHIKLM")},
+               **{letter: -(hours + 1) for hours, letter in enumerate("NOPQRSTUVWXY")}, "Z": 0}
+
+
 def datetime_from_match(match: re.Match[str]) -> datetime | RelativeTime:
-    """Build the value of a DATETIME match; raises ValueError for impossible dates."""
+    """Build the value of a DATETIME match; raises ValueError for impossible dates. A
+    designator letter gives the time zone (Z: UTC; none or J: local, a naive datetime);
+    on a relative time (leading sign) it carries no meaning and is ignored."""
     sign, year, month, day, hour, minute, second, millis, designator = match.groups()
     fields = [int(g) for g in (year, month, day, hour, minute, second, millis)]
     if sign:
-        if designator:
-            raise ValueError("a relative date-time takes no time zone designator")
         return RelativeTime(sign == "-", *fields)
-    if designator and designator not in "Zz":
-        raise ValueError(f"time zone designator {designator!r} is not supported; use Z (UTC)")
-    tz = timezone.utc if designator else None
-    return datetime(*fields[:6], fields[6] * 1000, tzinfo=tz)
+    offset = _ZONE_HOURS.get(designator.upper()) if designator else None
+    tz = None if offset is None else (timezone.utc if offset == 0
+                                      else timezone(timedelta(hours=offset)))
+    value = datetime(*fields[:6], fields[6] * 1000, tzinfo=tz)
+    try:  # the encoder writes UTC: refuse what has no UTC form (the first and last hours)
+        value.astimezone(timezone.utc)
+    except (OverflowError, OSError):
+        raise ValueError("the time lies outside the range of UTC dates") from None
+    return value
 
 
 def format_datetime(value: datetime | RelativeTime) -> str:
