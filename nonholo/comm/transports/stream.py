@@ -313,9 +313,14 @@ class StreamServer(InboxTransport):
                 await self._peers_changed.wait()
         await asyncio.wait_for(enough(), timeout)
 
+    COUNTERS = ("connections", "accepted", "hello_failed", "hello_timeouts", "evicted_pending",
+                "refused_name_in_use", "refused_full", "closed_idle", "closed_slow_reader",
+                "closed_framing", "closed_by_peer", "dropped_frames_of_closed_links")
+
     def stats(self) -> dict:
-        return {**super().stats(), "peers": {n: self._links[n].stats() for n in self.peers},
-                "pending": len(self._pending), **self._counts}
+        return {**super().stats(), "pending": len(self._pending),
+                **{name: self._counts[name] for name in self.COUNTERS},
+                "peers": {n: self._links[n].stats() for n in self.peers}}
 
     async def attach_socket(self, sock: socket.socket) -> None:
         """Serve one already connected stream socket (used for socketpair tests)."""
