@@ -59,6 +59,10 @@ INTERESTING = [0x00, 0x20, 0x22, 0x23, 0x28, 0x29, 0x2D, 0x3A, 0x40, 0x5C, 0x7F,
                0xFF]
 
 
+SLOW_KEPT = 5     # slowest inputs per target kept for re-timing
+RETIME_RUNS = 5
+
+
 @dataclass
 class TargetFigures:
     inputs: int = 0
@@ -66,8 +70,33 @@ class TargetFigures:
     rejected: int = 0
     failures: int = 0
     seconds: float = 0.0
-    slowest_s: float = 0.0
-    slowest_input: bytes = b""
+    slowest_s: float = 0.0       # the slowest single check as measured during the run
+    slowest_input: bytes = b""   # the input of the slowest check after re-timing
+    retimed_s: float = 0.0       # that input's best of RETIME_RUNS: the decoder's own cost
+    slow: list = field(default_factory=list, repr=False)  # (seconds, input, check)
+
+    def note(self, elapsed: float, data: bytes, check: Callable[[], bool]) -> None:
+        self.slowest_s = max(self.slowest_s, elapsed)
+        if len(self.slow) < SLOW_KEPT or elapsed > self.slow[-1][0]:
+            self.slow.append((elapsed, data, check))
+            self.slow.sort(key=lambda item: -item[0])
+            del self.slow[SLOW_KEPT:]
+
+    def retime(self) -> None:
+        """Run the slowest inputs again, best of several: a check that was slow only
+        because the machine was busy (scheduler, garbage collector) is fast again."""
+        for _, data, check in self.slow:
+            best = float("inf")
+            for _ in range(RETIME_RUNS):
+                began = time.perf_counter()
+                try:
+                    check()
+                except Exception:  # noqa: BLE001 - only the time matters here
+                    pass
+                best = min(best, time.perf_counter() - began)
+            if best > self.retimed_s or not self.slowest_input:
+                self.retimed_s, self.slowest_input = best, data
+        self.slow.clear()
 
 
 @dataclass
@@ -86,21 +115,22 @@ class FuzzReport:
         return sum(t.failures for t in self.targets.values())
 
     def as_json(self) -> dict:
-        slowest = max(self.targets.items(), key=lambda kv: kv[1].slowest_s, default=None)
+        slowest = max(self.targets.items(), key=lambda kv: kv[1].retimed_s, default=None)
         return {
             "seconds": round(self.seconds, 3), "seed": self.seed,
             "inputs": self.total_inputs,
             "inputs_per_s": round(self.total_inputs / self.seconds) if self.seconds else 0,
             "failures": self.total_failures,
             "slowest": None if slowest is None else {
-                "target": slowest[0], "ms": round(slowest[1].slowest_s * 1e3, 3),
+                "target": slowest[0], "ms": round(slowest[1].retimed_s * 1e3, 3),
                 "bytes": len(slowest[1].slowest_input),
                 "input_hex": slowest[1].slowest_input[:64].hex()},
             "targets": {name: {"inputs": t.inputs, "accepted": t.accepted,
                                "rejected": t.rejected, "failures": t.failures,
                                # the check alone, without generating the input
                                "inputs_per_s": round(t.inputs / t.seconds) if t.seconds else 0,
-                               "slowest_ms": round(t.slowest_s * 1e3, 3)}
+                               "slowest_measured_ms": round(t.slowest_s * 1e3, 3),
+                               "slowest_retimed_ms": round(t.retimed_s * 1e3, 3)}
                         for name, t in self.targets.items()},
             "failure_examples": self.failures,
         }
@@ -307,8 +337,7 @@ def run(seconds: float = 10.0, seed: int = 0,
                 elapsed = time.perf_counter() - began
                 figures.inputs += 1
                 figures.seconds += elapsed
-                if elapsed > figures.slowest_s:
-                    figures.slowest_s, figures.slowest_input = elapsed, data
+                figures.note(elapsed, data, check)
                 if accepted is None:
                     figures.failures += 1
                     if len(report.failures) < FAILURES_KEPT:
@@ -318,9 +347,11 @@ def run(seconds: float = 10.0, seed: int = 0,
                     figures.accepted += 1
                 else:
                     figures.rejected += 1
+        report.seconds = time.perf_counter() - start
+        for figures in report.targets.values():
+            figures.retime()
     finally:
         frames.close()
-    report.seconds = time.perf_counter() - start
     return report
 
 
@@ -332,11 +363,13 @@ def format_report(report: FuzzReport) -> str:
     for name, row in figures["targets"].items():
         lines.append(f"  {name:9} {row['inputs']:9d} inputs ({row['inputs_per_s']:7d}/s checked)  "
                      f"accepted {row['accepted']:8d}  rejected {row['rejected']:8d}  "
-                     f"failures {row['failures']}  slowest {row['slowest_ms']:.2f} ms")
+                     f"failures {row['failures']}  slowest {row['slowest_measured_ms']:.2f} ms "
+                     f"measured, {row['slowest_retimed_ms']:.3f} ms re-timed")
     slowest = figures["slowest"]
     if slowest:
-        lines.append(f"slowest input: {slowest['ms']:.2f} ms ({slowest['target']}, "
-                     f"{slowest['bytes']} bytes)")
+        lines.append(f"slowest input re-timed (best of {RETIME_RUNS} runs of the "
+                     f"{SLOW_KEPT} slowest per target): {slowest['ms']:.3f} ms "
+                     f"({slowest['target']}, {slowest['bytes']} bytes)")
     for failure in figures["failure_examples"]:
         lines.append(f"FAILURE {failure['target']}: {failure['error']} "
                      f"(input hex {failure['input_hex'][:120]})")
