@@ -134,9 +134,12 @@ class StreamClient(Transport):
         self._reader = reader
         self._writer = writer
         self._closed = False
+        self._idle = False               # closed by the idle time-out
         self._last_sent = time.monotonic()
+        self._waiting_since: float | None = None  # a recv is waiting for a frame since
         self._counts: Counter[str] = Counter()
-        self._keepalive_task = asyncio.ensure_future(self._keep_alive())
+        # One task sends keepalives and watches for an idle hub: no timer per frame.
+        self._keepalive_task = asyncio.ensure_future(self._watch())
 
     @classmethod
     async def handshake(cls, name: str, reader: asyncio.StreamReader,
@@ -178,7 +181,8 @@ class StreamClient(Transport):
 
     def _fail(self) -> None:
         self._closed = True
-        self._keepalive_task.cancel()
+        if self._keepalive_task is not asyncio.current_task():
+            self._keepalive_task.cancel()
         self._writer.transport.abort()
 
     async def send(self, frame: bytes, to: str | None = None) -> None:
@@ -189,6 +193,8 @@ class StreamClient(Transport):
         self._writer.write(frame_bytes(frame))
         self._last_sent = time.monotonic()
         self._counts["sent"] += 1
+        if not self._writer.transport.get_write_buffer_size():
+            return  # all of it went to the socket: nothing to wait for
         try:
             async with asyncio.timeout(self.limits.write_timeout):
                 await self._writer.drain()
@@ -203,32 +209,44 @@ class StreamClient(Transport):
     async def recv(self) -> tuple[str, bytes]:
         self._check_open()
         while True:
+            self._waiting_since = time.monotonic()
             try:
-                async with asyncio.timeout(self.limits.idle_timeout):
-                    frame = await read_frame(self._reader, self.capabilities.max_frame)
-            except TimeoutError:
-                self._fail()
-                raise TransportClosed(f"nothing from {self.peer} for "
-                                      f"{self.limits.idle_timeout} s (idle time-out)") from None
+                frame = await read_frame(self._reader, self.capabilities.max_frame)
             except (TransportClosed, FramingError):
                 self._fail()
+                if self._idle:
+                    raise TransportClosed(f"nothing from {self.peer} for "
+                                          f"{self.limits.idle_timeout} s (idle time-out)") from None
                 raise
+            finally:
+                self._waiting_since = None
             if frame:
                 self._counts["received"] += 1
                 return self.peer, frame
             self._counts["keepalives_received"] += 1
 
-    async def _keep_alive(self) -> None:
-        interval = self.limits.keepalive_interval
+    async def _watch(self) -> None:
+        """Send a keepalive after keepalive_interval without sending; close the link when
+        a recv has waited idle_timeout without any frame (a keepalive counts)."""
+        interval, idle = self.limits.keepalive_interval, self.limits.idle_timeout
         while not self._closed:
-            await asyncio.sleep(max(0.0, self._last_sent + interval - time.monotonic()))
-            if self._writer.is_closing():
+            now = time.monotonic()
+            waiting = self._waiting_since
+            if waiting is not None and now - waiting >= idle:
+                self._idle = True
+                self._fail()
                 return
-            if time.monotonic() - self._last_sent >= interval:
+            if now - self._last_sent >= interval:
+                if self._writer.is_closing():
+                    return
                 if self._writer.transport.get_write_buffer_size() == 0:
                     self._writer.write(KEEPALIVE)
                     self._counts["keepalives_sent"] += 1
-                self._last_sent = time.monotonic()
+                self._last_sent = now
+            wake = self._last_sent + interval
+            if waiting is not None:
+                wake = min(wake, waiting + idle)
+            await asyncio.sleep(max(0.0, wake - time.monotonic()))
 
     def stats(self) -> dict:
         return {"peer": self.peer, "sent": self._counts["sent"],
@@ -259,6 +277,7 @@ class _Link:
         self.inbox_bytes = 0
         self.last_sent = time.monotonic()
         self.connected_at = self.last_sent
+        self.waiting_since: float | None = None  # the hub is waiting for its next frame since
         self.counts: Counter[str] = Counter()
         self.closed = False
         self.tasks: list[asyncio.Task] = []
@@ -409,15 +428,16 @@ class StreamServer(InboxTransport):
     async def _read_from(self, link: _Link) -> None:
         limits = self.limits
         while not link.closed:
+            # No timer per frame: the link's writer task watches waiting_since (idle).
+            link.waiting_since = time.monotonic()
             try:
-                async with asyncio.timeout(limits.idle_timeout):
-                    frame = await read_frame(link.reader, self.capabilities.max_frame)
-            except TimeoutError:
-                return self._drop(link, "closed_idle")
+                frame = await read_frame(link.reader, self.capabilities.max_frame)
             except FramingError:
                 return self._drop(link, "closed_framing")
             except TransportClosed:
                 return self._drop(link, "closed_by_peer")
+            finally:
+                link.waiting_since = None
             if not frame:
                 link.counts["keepalives_received"] += 1
                 continue
@@ -436,14 +456,21 @@ class StreamServer(InboxTransport):
 
     async def _write_to(self, link: _Link) -> None:
         """Move the link's queued frames to its socket when the socket has room; send
-        keepalives when idle; drop the link when its socket accepts nothing."""
+        keepalives when idle; drop the link when its socket accepts nothing, or when
+        nothing came from the peer for idle_timeout while the hub was reading it."""
         limits = self.limits
         writer = link.writer
         try:
             while not link.closed:
+                waiting = link.waiting_since
+                if waiting is not None and time.monotonic() - waiting >= limits.idle_timeout:
+                    self._drop(link, "closed_idle")
+                    return
                 if not link.queue:
                     link.wake.clear()
                     wait = link.last_sent + limits.keepalive_interval - time.monotonic()
+                    if waiting is not None:
+                        wait = min(wait, waiting + limits.idle_timeout - time.monotonic())
                     if wait > 0:
                         try:
                             async with asyncio.timeout(wait):
