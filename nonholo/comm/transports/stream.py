@@ -80,6 +80,17 @@ class StreamLimits:
 DEFAULT_LIMITS = StreamLimits()
 
 
+@dataclass(slots=True)
+class LinkTally:
+    """Frame counters of one link (plain attributes: they are bumped for every frame)."""
+
+    sent: int = 0
+    received: int = 0
+    dropped: int = 0          # frames the hub shed from this peer's full send queue
+    keepalives_sent: int = 0
+    keepalives_received: int = 0
+
+
 def frame_bytes(payload: bytes) -> bytes:
     return LENGTH.pack(len(payload)) + payload
 
@@ -137,7 +148,7 @@ class StreamClient(Transport):
         self._idle = False               # closed by the idle time-out
         self._last_sent = time.monotonic()
         self._waiting_since: float | None = None  # a recv is waiting for a frame since
-        self._counts: Counter[str] = Counter()
+        self.tally = LinkTally()
         # One task sends keepalives and watches for an idle hub: no timer per frame.
         self._keepalive_task = asyncio.ensure_future(self._watch())
 
@@ -192,7 +203,7 @@ class StreamClient(Transport):
         self._check_open()
         self._writer.write(frame_bytes(frame))
         self._last_sent = time.monotonic()
-        self._counts["sent"] += 1
+        self.tally.sent += 1
         if not self._writer.transport.get_write_buffer_size():
             return  # all of it went to the socket: nothing to wait for
         try:
@@ -221,9 +232,9 @@ class StreamClient(Transport):
             finally:
                 self._waiting_since = None
             if frame:
-                self._counts["received"] += 1
+                self.tally.received += 1
                 return self.peer, frame
-            self._counts["keepalives_received"] += 1
+            self.tally.keepalives_received += 1
 
     async def _watch(self) -> None:
         """Send a keepalive after keepalive_interval without sending; close the link when
@@ -241,7 +252,7 @@ class StreamClient(Transport):
                     return
                 if self._writer.transport.get_write_buffer_size() == 0:
                     self._writer.write(KEEPALIVE)
-                    self._counts["keepalives_sent"] += 1
+                    self.tally.keepalives_sent += 1
                 self._last_sent = now
             wake = self._last_sent + interval
             if waiting is not None:
@@ -249,10 +260,9 @@ class StreamClient(Transport):
             await asyncio.sleep(max(0.0, wake - time.monotonic()))
 
     def stats(self) -> dict:
-        return {"peer": self.peer, "sent": self._counts["sent"],
-                "received": self._counts["received"],
-                "keepalives_sent": self._counts["keepalives_sent"],
-                "keepalives_received": self._counts["keepalives_received"]}
+        return {"peer": self.peer, "sent": self.tally.sent, "received": self.tally.received,
+                "keepalives_sent": self.tally.keepalives_sent,
+                "keepalives_received": self.tally.keepalives_received}
 
     async def close(self) -> None:
         self._closed = True
@@ -278,7 +288,7 @@ class _Link:
         self.last_sent = time.monotonic()
         self.connected_at = self.last_sent
         self.waiting_since: float | None = None  # the hub is waiting for its next frame since
-        self.counts: Counter[str] = Counter()
+        self.tally = LinkTally()
         self.closed = False
         self.tasks: list[asyncio.Task] = []
 
@@ -288,11 +298,12 @@ class _Link:
         self.inbox_room.set()
 
     def stats(self) -> dict:
-        return {"sent": self.counts["sent"], "received": self.counts["received"],
-                "dropped": self.counts["dropped"], "queued": len(self.queue),
+        tally = self.tally
+        return {"sent": tally.sent, "received": tally.received,
+                "dropped": tally.dropped, "queued": len(self.queue),
                 "queued_bytes": self.queued_bytes, "inbox": self.inbox_frames,
-                "keepalives_sent": self.counts["keepalives_sent"],
-                "keepalives_received": self.counts["keepalives_received"],
+                "keepalives_sent": tally.keepalives_sent,
+                "keepalives_received": tally.keepalives_received,
                 "connected_s": round(time.monotonic() - self.connected_at, 3)}
 
 
@@ -439,9 +450,9 @@ class StreamServer(InboxTransport):
             finally:
                 link.waiting_since = None
             if not frame:
-                link.counts["keepalives_received"] += 1
+                link.tally.keepalives_received += 1
                 continue
-            link.counts["received"] += 1
+            link.tally.received += 1
             # This peer's ration of the inbox: when it is used up, stop reading it (TCP
             # flow control then slows the sender down) until recv takes its frames.
             while link.inbox_frames >= limits.inbox_frames_per_peer or (
@@ -481,7 +492,7 @@ class StreamServer(InboxTransport):
                         if time.monotonic() - link.last_sent >= limits.keepalive_interval:
                             if writer.transport.get_write_buffer_size() == 0:
                                 writer.write(KEEPALIVE)
-                                link.counts["keepalives_sent"] += 1
+                                link.tally.keepalives_sent += 1
                             link.last_sent = time.monotonic()
                         continue
                 try:
@@ -496,7 +507,7 @@ class StreamServer(InboxTransport):
                 link.queue.clear()
                 link.queued_bytes = 0
                 writer.write(b"".join(frame_bytes(frame) for frame in batch))
-                link.counts["sent"] += len(batch)
+                link.tally.sent += len(batch)
                 link.last_sent = time.monotonic()
         except ConnectionError:
             self._drop(link, "closed_by_peer")
@@ -506,7 +517,7 @@ class StreamServer(InboxTransport):
             return  # its reader notices the end of the stream and drops the link
         if not link.queue and link.writer.transport.get_write_buffer_size() < LINK_BUFFER_BYTES:
             link.writer.write(frame_bytes(frame))  # the socket has room: no queueing
-            link.counts["sent"] += 1
+            link.tally.sent += 1
             link.last_sent = time.monotonic()
             return
         link.queue.append(frame)
@@ -516,7 +527,7 @@ class StreamServer(InboxTransport):
                                        or link.queued_bytes > limits.send_queue_bytes):
             dropped = link.queue.popleft()
             link.queued_bytes -= len(dropped)
-            link.counts["dropped"] += 1
+            link.tally.dropped += 1
         link.wake.set()
 
     def _drop(self, link: _Link, reason: str | None) -> None:
@@ -525,7 +536,7 @@ class StreamServer(InboxTransport):
         link.closed = True
         if reason is not None:
             self._counts[reason] += 1
-        self._counts["dropped_frames_of_closed_links"] += link.counts["dropped"]
+        self._counts["dropped_frames_of_closed_links"] += link.tally.dropped
         if self._links.get(link.name) is link:
             del self._links[link.name]
             self._peers_changed.set()
