@@ -75,8 +75,11 @@ def is_word(text: str) -> bool:
 
 
 def is_portable_word(text: str) -> bool:
-    """True if ``text`` can be written unquoted for every reader (see PORTABLE_WORD)."""
-    return PORTABLE_WORD.fullmatch(text) is not None and is_word(text)
+    """True if ``text`` can be written unquoted for every reader (see PORTABLE_WORD; every
+    portable word is a Word of the grammar)."""
+    return PORTABLE_WORD.fullmatch(text) is not None and not (
+        text[0] in NUMBER_START and looks_like_number_or_datetime(text)
+    )
 
 
 # The one-letter time zones (the military/nautical letters of ISO 8601 practice): Z is UTC,
