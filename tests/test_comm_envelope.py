@@ -139,7 +139,7 @@ def test_senders_have_independent_windows(pair):
 
 def test_channel_verifies_before_parsing(pair):
     sealer, opener, _ = pair
-    channel = SecureChannel(sealer, opener)
+    channel = SecureChannel(sealer, opener, senders={7: "leader@fleet"})
     message = ACLMessage("inform", sender=AgentID("leader@fleet"), content="state")
     opened, decoded = channel.unpack(channel.pack(message))
     assert decoded == message and opened.sender_id == 7

@@ -12,10 +12,17 @@ from nonholo.comm.loopback import pooled_latency, run_fleet
 from nonholo.comm.transports import TransportClosed, UnknownPeer
 from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.comm.transports.rfcomm import bluetooth_available
+from nonholo.comm.transports.hello import LinkAuth
 from nonholo.comm.transports.stream import LENGTH, StreamClient, StreamServer
 from nonholo.comm.transports.tcp import connect_tcp, serve_tcp, tcp_port
 
 TIMEOUT = 10.0
+KEYS = {i: bytes([i + 1]) * 32 for i in range(4)}
+HUB = LinkAuth(KEYS)  # any key opens any name: these tests are not about names
+
+
+def peer(key_id: int = 1) -> LinkAuth:
+    return LinkAuth(KEYS, key_id=key_id)
 
 
 def run(coroutine):
@@ -45,9 +52,9 @@ def test_inproc_unicast_broadcast_deterministic():
 
 def test_tcp_star_send_to_one_and_all():
     async def scenario():
-        server = await serve_tcp("leader", "127.0.0.1", 0)
+        server = await serve_tcp("leader", "127.0.0.1", 0, auth=HUB)
         port = tcp_port(server)
-        clients = [await connect_tcp(f"f{i}", "127.0.0.1", port) for i in range(3)]
+        clients = [await connect_tcp(f"f{i}", "127.0.0.1", port, auth=peer(i)) for i in range(3)]
         await server.wait_for_peers(3, TIMEOUT)
         assert server.peers == ["f0", "f1", "f2"] and clients[0].peer == "leader"
         await server.send(b"broadcast")
@@ -69,8 +76,8 @@ def test_tcp_star_send_to_one_and_all():
 
 def test_tcp_oversized_frame_closes_the_stream():
     async def scenario():
-        server = await serve_tcp("leader", "127.0.0.1", 0, max_frame=1024)
-        client = await connect_tcp("f1", "127.0.0.1", tcp_port(server))
+        server = await serve_tcp("leader", "127.0.0.1", 0, max_frame=1024, auth=HUB)
+        client = await connect_tcp("f1", "127.0.0.1", tcp_port(server), auth=peer())
         await server.wait_for_peers(1, TIMEOUT)
         client._writer.write(LENGTH.pack(10**6))  # claims 1 MB: refused before reading
         await client._writer.drain()
@@ -85,9 +92,9 @@ def test_stream_framing_over_socketpair():
     """RFCOMM reuses this framing unchanged; socketpair has the same stream semantics."""
     async def scenario():
         hub_side, robot_side = socket.socketpair()
-        hub = StreamServer("master")
+        hub = StreamServer("master", auth=HUB)
         await hub.attach_socket(hub_side)
-        robot = await StreamClient.over_socket("slave-1", robot_side)
+        robot = await StreamClient.over_socket("slave-1", robot_side, auth=peer())
         await hub.wait_for_peers(1, TIMEOUT)
         payloads = [b"a", bytes(range(256)) * 200, b"\x00" * 3]
         for payload in payloads:

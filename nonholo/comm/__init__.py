@@ -14,7 +14,8 @@ from nonholo.comm.channel import SecureChannel
 from nonholo.comm.envelope import Opened, Opener, Sealer
 from nonholo.comm.errors import (
     ACLEncodeError, ACLParseError, CommError, ContentError, EnvelopeError, ForgedMessage,
-    KeyFileError, MalformedEnvelope, ProtocolError, ReplayedMessage, StaleMessage, UnknownKey,
+    KeyFileError, MalformedEnvelope, ProtocolError, ReplayedMessage, SenderMismatch, StaleMessage,
+    UnknownKey,
 )
 from nonholo.comm.message import PERFORMATIVES, ACLMessage, AgentID, RelativeTime
 
@@ -22,5 +23,5 @@ __all__ = [
     "ACLEncodeError", "ACLMessage", "ACLParseError", "AgentID", "CommError", "ContentError",
     "EnvelopeError", "ForgedMessage", "KeyFileError", "MalformedEnvelope", "Opened", "Opener",
     "PERFORMATIVES", "ProtocolError", "RelativeTime", "ReplayedMessage", "SecureChannel",
-    "Sealer", "StaleMessage", "UnknownKey", "decode", "encode", "encode_text",
+    "Sealer", "SenderMismatch", "StaleMessage", "UnknownKey", "decode", "encode", "encode_text",
 ]

@@ -31,10 +31,15 @@ _KIND_NAMES = {_END: "end of input", lex.OPEN: "'('", lex.CLOSE: "')'", lex.STRI
 def decode(data: bytes | str, *, max_depth: int = lex.DEFAULT_MAX_DEPTH,
            max_size: int = lex.DEFAULT_MAX_SIZE) -> ACLMessage:
     """Parse one ACL message; raise ACLParseError (a ValueError) on any fault."""
+    lex.check_limits(max_depth, max_size)
+    if isinstance(data, str) and len(data) > max_size:  # at least as many bytes as characters
+        raise ACLParseError(f"message is over {max_size} bytes, longer than the limit", max_size)
     if isinstance(data, str):
-        data = data.encode("utf-8")
-    if not 1 <= max_depth <= lex.HARD_MAX_DEPTH:
-        raise ValueError(f"max_depth must be in 1..{lex.HARD_MAX_DEPTH}")
+        try:
+            data = data.encode("utf-8")
+        except UnicodeEncodeError as exc:  # a lone surrogate has no UTF-8 form
+            raise ACLParseError("text holds a lone surrogate, which is not Unicode text",
+                                len(data[:exc.start].encode("utf-8", "surrogatepass"))) from None
     if len(data) > max_size:
         raise ACLParseError(f"message is {len(data)} bytes, longer than the {max_size}-byte limit",
                             max_size)
@@ -159,8 +164,10 @@ class _Parser:
 
     # -- parameter values ---------------------------------------------------------------
     def value_token(self, parameter: Token) -> Token:
+        # Every parameter takes a value, so the token after a parameter name is always a
+        # value, even a word starting with ":" (a Word of the grammar).
         token = self.next()
-        if token[0] in (lex.CLOSE, _END) or (token[0] == lex.ATOM and token[1].startswith(":")):
+        if token[0] in (lex.CLOSE, _END):
             self.fail(token, f"expected a value for {parameter[1]}")
         return token
 

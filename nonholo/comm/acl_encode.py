@@ -1,10 +1,13 @@
 """Encoder for the ACL string representation, following JADE's layout (one parameter per
 line, lower-case keywords, receivers as ``(set (agent-identifier ...))``).
 
-Quoting rule: a ``str`` goes out bare only if it reads back as the same word; otherwise as
-a string literal with ``\\"`` for quotes. The spec has no escape for a backslash, so any
-value holding a backslash or a control character goes out as a byte-length string
-``#N"...`` (N counted in UTF-8 bytes) whose body is raw. Content is never trimmed.
+Quoting rule (chosen so that JADE 4.6.5 reads what the standard lets it read): a ``str``
+goes out bare only if it is a printable-ASCII Word that reads back as the same word
+(``acl_lexical.is_portable_word``); otherwise as a string literal with ``\\"`` for quotes,
+where every other character, backslashes and control characters included, stands for
+itself. The one value a string literal cannot hold is one ending in a backslash (the spec
+has no escape for it: ``"C:\\"`` would read as an escaped quote), which goes out as a
+byte-length string ``#N"...`` (N counted in UTF-8 bytes). Content is never trimmed.
 """
 from __future__ import annotations
 
@@ -15,13 +18,13 @@ from nonholo.comm import acl_lexical as lex
 from nonholo.comm.errors import ACLEncodeError
 from nonholo.comm.message import PARAMETER_ATTRIBUTES, ACLMessage, AgentID, Expression, RelativeTime
 
-_NEEDS_RAW_BYTES = frozenset(["\\", "\x7f", *map(chr, range(0x20))])
-
 
 def encode(message: ACLMessage, *, max_depth: int = lex.DEFAULT_MAX_DEPTH,
            max_size: int = lex.DEFAULT_MAX_SIZE) -> bytes:
     """The UTF-8 bytes of ``message``; raises ACLEncodeError if it cannot be represented
-    or would exceed the limits a strict decoder enforces."""
+    or would exceed the limits a strict decoder enforces (ValueError for limits outside
+    their ceilings)."""
+    lex.check_limits(max_depth, max_size)
     try:
         data = _message_text(message, max_depth).encode("utf-8")
     except UnicodeEncodeError as exc:
@@ -63,13 +66,13 @@ def _user_params(params) -> list[tuple[str, Expression]]:
 def string_literal(text: str) -> str:
     if not isinstance(text, str):
         raise ACLEncodeError(f"expected a string, got {type(text).__name__}")
-    if _NEEDS_RAW_BYTES.isdisjoint(text):
+    if not text.endswith("\\"):
         return '"' + text.replace('"', '\\"') + '"'
     return f'#{len(text.encode("utf-8"))}"{text}'
 
 
 def word_or_string(text: str) -> str:
-    if isinstance(text, str) and text and lex.is_bare_word(text):
+    if isinstance(text, str) and text and lex.is_portable_word(text):
         return text
     return string_literal(text)
 
@@ -80,7 +83,11 @@ def _expression(value: Expression, depth: int, max_depth: int) -> str:
     if isinstance(value, bool):
         raise ACLEncodeError("booleans have no ACL form; use the words true/false")
     if isinstance(value, int):
-        return str(value)
+        try:
+            return str(value)
+        except ValueError:  # beyond Python's int-to-string digit limit
+            raise ACLEncodeError(f"integer of {value.bit_length()} bits is too long to "
+                                 "write (the decoder's limit)") from None
     if isinstance(value, float):
         if not math.isfinite(value):
             raise ACLEncodeError(f"{value} has no ACL number form")
@@ -129,7 +136,7 @@ def _agent_set(aids: tuple[AgentID, ...], max_depth: int) -> str:
 
 
 def _protocol(value: str, max_depth: int) -> str:
-    if not isinstance(value, str) or not value or not lex.is_bare_word(value):
+    if not isinstance(value, str) or not value or not lex.is_word(value):
         raise ACLEncodeError(f":protocol must be a word, got {value!r}")
     return value
 

@@ -34,6 +34,7 @@ HEADER = struct.Struct(">2sBBHHIQQI")
 TAG_SIZE = 32
 OVERHEAD = HEADER.size + TAG_SIZE
 RETIRED_EPOCHS_KEPT = 16
+MAX_SEQ = (1 << 64) - 1
 
 
 def wall_clock_ms() -> int:
@@ -66,6 +67,9 @@ class Sealer:
         self._clock_ms = clock_ms
 
     def seal(self, payload: bytes) -> bytes:
+        if self.seq >= MAX_SEQ:  # sequence space used up: start a new epoch, as a reboot would
+            self.epoch = (self.epoch + 1 + secrets.randbelow(0xFFFFFFFF)) & 0xFFFFFFFF
+            self.seq = 0
         self.seq += 1
         header = HEADER.pack(MAGIC, VERSION, 0, self.key_id, self.sender_id, self.epoch,
                              self.seq, self._clock_ms(), len(payload))
@@ -149,15 +153,17 @@ class Opener:
             state.retired.append(state.epoch)
             state.epoch, state.highest, state.seen_bits = opened.epoch, opened.seq, 1
             return
+        # Constant time and memory whatever the jump: the bitmap never holds more than
+        # ``width`` bits, and a jump of ``width`` or more simply starts a fresh window.
+        width = max(self.reorder_window, 1)
         behind = state.highest - opened.seq
         if behind < 0:
-            state.seen_bits = ((state.seen_bits << -behind) | 1) & self._window_mask()
+            ahead = -behind
+            state.seen_bits = (1 if ahead >= width else
+                               ((state.seen_bits << ahead) | 1) & ((1 << width) - 1))
             state.highest = opened.seq
             return
-        if behind >= max(self.reorder_window, 1) or state.seen_bits >> behind & 1:
+        if behind >= width or state.seen_bits >> behind & 1:
             raise ReplayedMessage(f"sequence {opened.seq} from sender {opened.sender_id} is a "
                                   f"replay or out of order (newest {state.highest})")
         state.seen_bits |= 1 << behind
-
-    def _window_mask(self) -> int:
-        return (1 << max(self.reorder_window, 1)) - 1

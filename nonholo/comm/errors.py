@@ -41,6 +41,11 @@ class ReplayedMessage(EnvelopeError):
     replay window, or the epoch was retired by a reboot."""
 
 
+class SenderMismatch(EnvelopeError):
+    """The ACL ``:sender`` is missing or names another agent than the one the envelope's
+    authenticated sender id belongs to (an authentic sender impersonating another)."""
+
+
 class StaleMessage(EnvelopeError):
     """The send time is older than the freshness limit or too far in the future."""
 

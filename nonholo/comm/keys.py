@@ -7,6 +7,7 @@ blank lines are ignored. Key ids are 0..65535; secrets must be at least 16 bytes
 from __future__ import annotations
 
 import os
+import re
 import secrets
 import stat
 from pathlib import Path
@@ -16,22 +17,38 @@ from nonholo.comm.errors import KeyFileError
 
 DEFAULT_KEY_ENV = "NONHOLO_ACL_KEYS"
 MIN_SECRET_BYTES = 16
+MAX_KEY_ID = 0xFFFF
+# ASCII digits only: int() would also take "1_0" (as 10), " 1" and non-ASCII digits.
+_KEY_ID = re.compile(r"[0-9]{1,5}")
+_HEX_SECRET = re.compile(r"(?:[0-9A-Fa-f]{2})+")
+MAX_KEY_TEXT = 1 << 20  # a key file or variable larger than 1 MiB is not a key list
+
+
+def parse_key_id(text: str) -> int:
+    """A key id written as 1 to 5 ASCII digits with a value in 0..65535; ValueError otherwise."""
+    if not _KEY_ID.fullmatch(text) or int(text) > MAX_KEY_ID:
+        raise ValueError(f"key id must be an integer 0..{MAX_KEY_ID} in ASCII digits, "
+                         f"got {text[:20]!r}")
+    return int(text)
 
 
 def parse_keys(text: str) -> dict[int, bytes]:
+    if len(text) > MAX_KEY_TEXT:
+        raise KeyFileError(f"key text is longer than {MAX_KEY_TEXT} characters")
     keys: dict[int, bytes] = {}
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         key_id_text, sep, hex_secret = line.partition(":")
+        hex_secret = hex_secret.strip()
+        if not sep or not _HEX_SECRET.fullmatch(hex_secret):
+            raise KeyFileError(f"line {number}: expected <key-id>:<hex secret>")
         try:
-            key_id = int(key_id_text)
-            secret = bytes.fromhex(hex_secret.strip())
-        except ValueError:
-            raise KeyFileError(f"line {number}: expected <key-id>:<hex secret>") from None
-        if not sep or not 0 <= key_id <= 0xFFFF:
-            raise KeyFileError(f"line {number}: key id must be 0..65535")
+            key_id = parse_key_id(key_id_text.strip())
+        except ValueError as exc:
+            raise KeyFileError(f"line {number}: {exc}") from None
+        secret = bytes.fromhex(hex_secret)
         if len(secret) < MIN_SECRET_BYTES:
             raise KeyFileError(f"line {number}: secret shorter than {MIN_SECRET_BYTES} bytes")
         if key_id in keys:
@@ -49,9 +66,17 @@ def load_key_file(path: str | os.PathLike[str]) -> dict[int, bytes]:
         mode = path.stat().st_mode
         if stat.S_IMODE(mode) & 0o077:
             raise KeyFileError(f"{path} has mode {stat.S_IMODE(mode):04o}; run chmod 600 on it")
-        return parse_keys(path.read_text(encoding="utf-8"))
+        with path.open("rb") as handle:
+            data = handle.read(MAX_KEY_TEXT + 1)
     except OSError as exc:
         raise KeyFileError(f"cannot read key file {path}: {exc.strerror}") from None
+    if len(data) > MAX_KEY_TEXT:
+        raise KeyFileError(f"{path} is larger than {MAX_KEY_TEXT} bytes; not a key file")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise KeyFileError(f"{path} is not UTF-8 text (byte {exc.start})") from None
+    return parse_keys(text)
 
 
 def load_key_env(variable: str = DEFAULT_KEY_ENV,
@@ -63,8 +88,8 @@ def load_key_env(variable: str = DEFAULT_KEY_ENV,
 
 
 def generate_key_line(key_id: int, size: int = 32) -> str:
-    if not 0 <= key_id <= 0xFFFF:
-        raise ValueError("key id must be 0..65535")
+    if isinstance(key_id, bool) or not isinstance(key_id, int) or not 0 <= key_id <= MAX_KEY_ID:
+        raise ValueError(f"key id must be an integer 0..{MAX_KEY_ID}")
     return f"{key_id}:{secrets.token_hex(size)}"
 
 

@@ -7,7 +7,8 @@ follower reports as one JSON line: received, lost, rejected, one-way latencies.
 Every wait is bounded, so a broken run fails instead of hanging.
 
 Keys: per-sender HMAC keys (key id = sender id; leader 0, followers 1..N) passed through
-the ``NONHOLO_ACL_KEYS`` environment variable of the child processes.
+the ``NONHOLO_ACL_KEYS`` environment variable of the child processes. Follower i proves
+key i in the TCP hello and signs its envelopes with it; the echo process uses key 1.
 """
 from __future__ import annotations
 
@@ -38,17 +39,38 @@ CONVERSATION = "formation-7"
 STARTUP_TIMEOUT_S = 20.0
 
 
+ECHO = "echo"
+
+
+def agent_name(sender_id: int) -> str:
+    """The agent of each key/sender id: 0 is the leader, i > 0 follower i."""
+    return LEADER.name if sender_id == 0 else f"f{sender_id}@fleet"
+
+
 def _channel(keys: dict[int, bytes], my_id: int) -> SecureChannel:
-    # Each key only authenticates its own sender id, so a follower cannot forge the leader.
+    # Each key only authenticates its own sender id, so a follower cannot forge the leader,
+    # and each sender id may only speak as its own agent (:sender bound to the envelope).
     return SecureChannel(Sealer(keys[my_id], key_id=my_id, sender_id=my_id),
-                         Opener(keys, key_senders={k: frozenset({k}) for k in keys}))
+                         Opener(keys, key_senders={k: frozenset({k}) for k in keys}),
+                         senders={k: agent_name(k) for k in keys})
 
 
-async def _open_transport(kind: str, name: str, port: int, leader: bool) -> Transport:
+def _link_auth(keys: dict[int, bytes], key_id: int, leader: bool):
+    """The TCP hello keys: each follower proves its own key; the echo process uses key 1."""
+    from nonholo.comm.transports.hello import LinkAuth
+    if leader:
+        peers = {agent_name(k): k for k in keys if k != 0}
+        return LinkAuth(keys, peer_key_ids={**peers, ECHO: 1})
+    return LinkAuth(keys, key_id=key_id)
+
+
+async def _open_transport(kind: str, name: str, port: int, leader: bool,
+                          keys: dict[int, bytes], key_id: int) -> Transport:
     if kind == "tcp":
         from nonholo.comm.transports.tcp import connect_tcp, serve_tcp
-        return await (serve_tcp(name, "127.0.0.1", port) if leader
-                      else connect_tcp(name, "127.0.0.1", port))
+        auth = _link_auth(keys, key_id, leader)
+        return await (serve_tcp(name, "127.0.0.1", port, auth=auth) if leader
+                      else connect_tcp(name, "127.0.0.1", port, auth=auth))
     if kind == "zenoh":
         from nonholo.comm.transports.zenoh import ZenohTransport, peer_config
         endpoint = f"tcp/127.0.0.1:{port}"
@@ -61,9 +83,9 @@ async def _open_transport(kind: str, name: str, port: int, leader: bool) -> Tran
 # -- follower (child process) -----------------------------------------------------------
 async def run_follower(kind: str, port: int, index: int, count: int, timeout: float) -> dict:
     keys = load_key_env()
-    me = AgentID(f"f{index}@fleet")
+    me = AgentID(agent_name(index))
     channel = _channel(keys, index)
-    transport = await _open_transport(kind, me.name, port, leader=False)
+    transport = await _open_transport(kind, me.name, port, False, keys, index)
     conversation = Conversation(SUBSCRIBE_PROTOCOL, CONVERSATION)
     subscribe = ACLMessage("subscribe", sender=me, receivers=(LEADER,),
                            content="((iota ?s (leader-state ?s)))", language="fipa-sl0",
@@ -102,7 +124,7 @@ async def run_follower(kind: str, port: int, index: int, count: int, timeout: fl
 
 async def run_echo(kind: str, port: int, rounds: int, timeout: float) -> dict:
     """Send every frame straight back (raw frames, no envelope: measures the link)."""
-    transport = await _open_transport(kind, "echo", port, leader=False)
+    transport = await _open_transport(kind, ECHO, port, False, load_key_env(), 1)
     await transport.send(b"ready", to=LEADER.name)
     echoed = 0
     try:
@@ -120,15 +142,16 @@ async def run_echo(kind: str, port: int, rounds: int, timeout: float) -> dict:
 async def run_round_trips(kind: str = "tcp", rounds: int = 2000, warmup: int = 200,
                           payload_size: int = 400, timeout: float = 30.0) -> list[float]:
     """Round-trip times in microseconds between this process and an echo process."""
+    keys, env = _fresh_keys(1)
     port = _free_port() if kind == "zenoh" else 0
-    transport = await _open_transport(kind, LEADER.name, port, leader=True)
+    transport = await _open_transport(kind, LEADER.name, port, True, keys, 0)
     if kind == "tcp":
         from nonholo.comm.transports.tcp import tcp_port
         port = tcp_port(transport)  # type: ignore[arg-type]
     child = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "nonholo.comm.loopback", "echo", "--transport", kind,
         "--port", str(port), "--index", "0", "--count", str(rounds + warmup),
-        "--timeout", str(timeout), stdout=subprocess.PIPE)
+        "--timeout", str(timeout), stdout=subprocess.PIPE, env=env)
     payload = bytes(payload_size)
     times: list[float] = []
     try:
@@ -152,11 +175,10 @@ async def run_round_trips(kind: str = "tcp", rounds: int = 2000, warmup: int = 2
 async def run_fleet(kind: str = "tcp", followers: int = 7, count: int = 200,
                     rate_hz: float = 100.0, port: int = 0, timeout: float = 30.0) -> dict:
     """Run the whole exchange; returns per-follower reports and pooled latency figures."""
-    keys = {i: bytes.fromhex(generate_key_line(i).split(":")[1]) for i in range(followers + 1)}
-    env = dict(os.environ, **{DEFAULT_KEY_ENV: ";".join(f"{k}:{v.hex()}" for k, v in keys.items())})
+    keys, env = _fresh_keys(followers)
     if kind == "zenoh" and port == 0:
         port = _free_port()
-    transport = await _open_transport(kind, LEADER.name, port, leader=True)
+    transport = await _open_transport(kind, LEADER.name, port, True, keys, 0)
     if kind == "tcp":
         from nonholo.comm.transports.tcp import tcp_port
         port = tcp_port(transport)  # type: ignore[arg-type]
@@ -208,6 +230,13 @@ async def _stream_states(transport: Transport, channel: SecureChannel, count: in
         state = LeaderState(seq, time.time(), 0.01 * seq, 0.0, 0.0, 0.35, -0.12, CONVERSATION)
         message = state_inform(state, LEADER, (FOLLOWERS,), CONVERSATION)
         await transport.send(channel.pack(message))
+
+
+def _fresh_keys(followers: int) -> tuple[dict[int, bytes], dict[str, str]]:
+    """New random keys 0..followers, and an environment that hands them to children."""
+    keys = {i: bytes.fromhex(generate_key_line(i).split(":")[1]) for i in range(followers + 1)}
+    env = dict(os.environ, **{DEFAULT_KEY_ENV: ";".join(f"{k}:{v.hex()}" for k, v in keys.items())})
+    return keys, env
 
 
 def _free_port() -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import abc
 import asyncio
 from dataclasses import dataclass
+from typing import Callable
 
 from nonholo.comm.envelope import OVERHEAD
 from nonholo.comm.acl_lexical import DEFAULT_MAX_SIZE
@@ -22,8 +23,8 @@ class UnknownPeer(CommError):
 
 
 class FramingError(CommError):
-    """A stream carried a frame length of zero or above the limit; the stream is closed
-    because resynchronising inside a byte stream is unsafe."""
+    """A stream carried a frame length above the limit; the stream is closed because
+    resynchronising inside a byte stream is unsafe."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,36 +53,70 @@ class Transport(abc.ABC):
     async def close(self) -> None:
         """Release the link; idempotent."""
 
+    def stats(self) -> dict:
+        """Counters of this transport (frames, drops, closes); the keys depend on the kind."""
+        return {}
+
     def check_frame(self, frame: bytes) -> None:
         if not 0 < len(frame) <= self.capabilities.max_frame:
             raise ValueError(f"frame of {len(frame)} bytes outside 1..{self.capabilities.max_frame}")
 
 
+# Default bound of an inbox, in frames (a few seconds of a 100 Hz stream from 7 peers).
+DEFAULT_INBOX_FRAMES = 4096
+
+
 class InboxTransport(Transport):
-    """A transport whose received frames wait in an asyncio queue (``self.inbox``) until
-    ``recv``; closing puts a sentinel in it so that a pending ``recv`` wakes up."""
+    """A transport whose received frames wait in a bounded asyncio queue (``self.inbox``)
+    until ``recv``. ``deliver`` adds a frame; when the inbox is full the oldest frame is
+    dropped and counted in ``inbox_dropped`` (latest-value semantics: an old state is
+    worth less than a new one). Closing wakes a pending ``recv``."""
 
     _CLOSED = object()
 
-    def __init__(self) -> None:
-        self.inbox: asyncio.Queue = asyncio.Queue()
+    def __init__(self, inbox_frames: int = DEFAULT_INBOX_FRAMES) -> None:
+        if isinstance(inbox_frames, bool) or not isinstance(inbox_frames, int) \
+                or inbox_frames < 1:
+            raise ValueError("inbox_frames must be a positive integer")
+        self.inbox: asyncio.Queue = asyncio.Queue(inbox_frames)
+        self.inbox_dropped = 0
         self._closed = False
 
     def ensure_open(self) -> None:
         if self._closed:
             raise TransportClosed(f"{self.name} is closed")
 
+    def deliver(self, peer: str, frame: bytes,
+                on_taken: Callable[[bytes], None] | None = None) -> None:
+        """Queue a received frame; ``on_taken(frame)`` runs when it leaves the inbox (taken
+        by ``recv`` or dropped), for transports that ration the inbox per peer."""
+        if self._closed:
+            return
+        while self.inbox.full():
+            _, dropped, dropped_taken = self.inbox.get_nowait()
+            self.inbox_dropped += 1
+            if dropped_taken is not None:
+                dropped_taken(dropped)
+        self.inbox.put_nowait((peer, frame, on_taken))
+
+    def stats(self) -> dict:
+        return {"inbox": self.inbox.qsize(), "inbox_dropped": self.inbox_dropped}
+
     async def recv(self) -> tuple[str, bytes]:
         self.ensure_open()
         item = await self.inbox.get()
         if item is self._CLOSED:
             raise TransportClosed(f"{self.name} is closed")
-        return item
+        peer, frame, on_taken = item
+        if on_taken is not None:
+            on_taken(frame)
+        return peer, frame
 
     def mark_closed(self) -> bool:
         """Mark closed and wake receivers; False if it already was (close is idempotent)."""
         if self._closed:
             return False
         self._closed = True
-        self.inbox.put_nowait(self._CLOSED)
+        if not self.inbox.full():  # a full inbox has no waiting receiver to wake
+            self.inbox.put_nowait(self._CLOSED)
         return True

@@ -1,17 +1,20 @@
 """In-process transport: asyncio queues, deterministic order, no sockets. For simulation
-and tests: broadcast visits peers in name order, so runs repeat exactly."""
+and tests: broadcast visits peers in name order, so runs repeat exactly. Each inbox holds
+at most ``inbox_frames`` frames; beyond that the oldest is dropped and counted."""
 from __future__ import annotations
 
 from nonholo.comm.transports.base import (
-    DEFAULT_MAX_FRAME, Capabilities, InboxTransport, UnknownPeer,
+    DEFAULT_INBOX_FRAMES, DEFAULT_MAX_FRAME, Capabilities, InboxTransport, UnknownPeer,
 )
 
 
 class InProcNetwork:
     """A hub of named endpoints living in one event loop."""
 
-    def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
+    def __init__(self, max_frame: int = DEFAULT_MAX_FRAME,
+                 inbox_frames: int = DEFAULT_INBOX_FRAMES) -> None:
         self.max_frame = max_frame
+        self.inbox_frames = inbox_frames
         self._endpoints: dict[str, InProcTransport] = {}
 
     def endpoint(self, name: str) -> "InProcTransport":
@@ -29,7 +32,7 @@ class InProcNetwork:
         else:
             raise UnknownPeer(f"no endpoint named {to!r}")
         for target in targets:
-            target.inbox.put_nowait((sender, frame))
+            target.deliver(sender, frame)
 
     def remove(self, name: str) -> None:
         self._endpoints.pop(name, None)
@@ -40,7 +43,7 @@ class InProcTransport(InboxTransport):
         self.name = name
         self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=True,
                                          max_frame=network.max_frame)
-        super().__init__()
+        super().__init__(network.inbox_frames)
         self._network = network
 
     async def send(self, frame: bytes, to: str | None = None) -> None:

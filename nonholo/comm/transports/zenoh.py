@@ -8,11 +8,12 @@ name travels as the sample attachment.
 from __future__ import annotations
 
 import asyncio
+import threading
 
 import zenoh
 
 from nonholo.comm.transports.base import (
-    DEFAULT_MAX_FRAME, Capabilities, InboxTransport,
+    DEFAULT_INBOX_FRAMES, DEFAULT_MAX_FRAME, Capabilities, InboxTransport,
 )
 
 
@@ -32,13 +33,17 @@ def _json_list(items: list[str]) -> str:
 
 class ZenohTransport(InboxTransport):
     def __init__(self, name: str, fleet: str, config: zenoh.Config,
-                 max_frame: int = DEFAULT_MAX_FRAME) -> None:
+                 max_frame: int = DEFAULT_MAX_FRAME,
+                 inbox_frames: int = DEFAULT_INBOX_FRAMES) -> None:
         self.name = name
         self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=True,
                                          max_frame=max_frame)
         self._prefix = f"nonholo/{fleet}"
         self._loop = asyncio.get_running_loop()
-        super().__init__()
+        self._hop_lock = threading.Lock()
+        self._in_flight = 0
+        self._hop_dropped = 0  # oversized, or over the bound before reaching the loop
+        super().__init__(inbox_frames)
         self._session = zenoh.open(config)
         self._subscribers = [
             self._session.declare_subscriber(f"{self._prefix}/all", self._on_sample),
@@ -56,9 +61,28 @@ class ZenohTransport(InboxTransport):
 
     def _on_sample(self, sample: "zenoh.Sample") -> None:  # runs on a Zenoh thread
         sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else "?"
-        if sender != self.name:
-            self._loop.call_soon_threadsafe(self.inbox.put_nowait,
-                                            (sender, sample.payload.to_bytes()))
+        if sender == self.name:
+            return
+        payload = sample.payload.to_bytes()
+        with self._hop_lock:
+            # Frames on their way to the event loop are bounded like the inbox itself:
+            # a flood that outpaces the loop is dropped here, counted, not queued.
+            if not 0 < len(payload) <= self.capabilities.max_frame \
+                    or self._in_flight >= self.inbox.maxsize:
+                self._hop_dropped += 1
+                return
+            self._in_flight += 1
+        self._loop.call_soon_threadsafe(self._arrived, sender, payload)
+
+    def _arrived(self, sender: str, payload: bytes) -> None:  # on the event loop
+        with self._hop_lock:
+            self._in_flight -= 1
+        self.deliver(sender, payload)
+
+    def stats(self) -> dict:
+        with self._hop_lock:
+            hop_dropped = self._hop_dropped
+        return {**super().stats(), "arrival_dropped": hop_dropped}
 
     async def send(self, frame: bytes, to: str | None = None) -> None:
         self.ensure_open()
