@@ -605,6 +605,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
-    for function in (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score):
+    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
+    for function in inner:
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{function.py_func.__name__}")
+    for function in inner:   # and every module-level function their code calls
+        stable_cache_identity(function)
     return integrate, evaluate, score
