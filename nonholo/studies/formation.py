@@ -703,7 +703,7 @@ def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[t
     window = time_window(switch, at + GIF_WINDOW[0], at + GIF_WINDOW[1])
     # the animation's title is the formation's name: use it as the legend
     titled = dataclasses.replace(switch.formation, name="Eq 5.9 change (blue: leader, orange: follower)")
-    window = dataclasses.replace(window, formations=[titled])
+    window = dataclasses.replace(window, scenarios=(titled,))
     window.write_gif(folder / "switch.gif", frames=study.gif_frames, fps=8, trail=8.0)
     figures.append(("switch.gif", f"Animation of the Eq 5.9 change on Test 4, t = {at + GIF_WINDOW[0]:g}–"
                                   f"{at + GIF_WINDOW[1]:g} s: the follower swings behind the leader (grey: leader axle "
