@@ -300,26 +300,6 @@ class _Reader:
         direction = self.string(data.get("direction", "shortest"), f"{where}.direction", DIRECTIONS)
         return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
 
-    def change(self, data, where: str, outputs) -> Change:
-        self.table(data, where, CHANGE_FIELDS)
-        if "at" not in data:
-            self.fail(f"{where}.at", "missing: the time of the change (s)")
-        targets = {}
-        for name in ("l", "phi", "l1", "l2"):
-            if name in data:
-                if name not in outputs:
-                    self.fail(f"{where}.{name}", f"not an output of this follower (outputs: {', '.join(outputs)})")
-                targets[name] = self.angle(data[name], f"{where}.{name}") if name == "phi" else \
-                    self.number(data[name], f"{where}.{name}")
-        mode = self.string(data.get("mode", "step"), f"{where}.mode", CHANGE_MODES)
-        duration = self.number(data["duration"], f"{where}.duration", positive=True) if "duration" in data else 0.0
-        if mode == "ramp" and "duration" not in data:
-            self.fail(f"{where}.duration", "missing: a ramp needs its duration (s)")
-        if mode == "step" and "duration" in data:
-            self.fail(f"{where}.duration", "only a ramp has a duration (mode = \"ramp\")")
-        direction = self.string(data.get("direction", "shortest"), f"{where}.direction", DIRECTIONS)
-        return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
-
     def scenario(self, data, name: str) -> Scenario:
         data = self.table(data, "", {"simulation", "reference", "robots", "name", "formation"})
         simulation = self.table(data.get("simulation", {}), "simulation", SIMULATION_FIELDS)
