@@ -33,3 +33,17 @@ class InfeasibleReferenceError(NonholoInputError):
 class SimulationError(RuntimeError):
     """A simulation that could not produce finite results (for example a law driven
     unstable by too large a step). The CLI prints it on one line and exits with code 1."""
+
+
+class InputFileError(NonholoInputError):
+    """A file or text that cannot be read as input (TOML) within the limits: unreadable,
+    too large, not UTF-8, nested too deeply or not valid TOML (``nonholo.tomlfile``).
+
+    ``source`` is the file (or "<scenario>"), ``problem`` what is wrong; readers of a
+    schema re-raise it as their own error with ``problem``.
+    """
+
+    def __init__(self, source: str, problem: str):
+        self.source = source
+        self.problem = problem
+        super().__init__(f"{source}: {problem}")
