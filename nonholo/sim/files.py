@@ -194,18 +194,24 @@ class _Reader:
 def parse_scenario(text: str, source: str = "<scenario>", name: str = "scenario") -> Scenario:
     """A Scenario (a ``nonholo.formation.Formation`` for formation files) from TOML text;
     ``ScenarioError`` (one line) on any problem."""
+    from nonholo.errors import InputFileError
+    from nonholo.tomlfile import parse_toml
+
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
+        data = parse_toml(text, source)
+    except InputFileError as exc:
+        raise ScenarioError(source, "", exc.problem) from None
     return _Reader(source).scenario(data, name)
 
 
 def load_scenario(path) -> Scenario:
-    """A Scenario from a TOML file."""
+    """A Scenario from a TOML file, read within the limits of ``nonholo.tomlfile``."""
+    from nonholo.errors import InputFileError
+    from nonholo.tomlfile import read_toml
+
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(str(path), "", f"cannot read: {exc.strerror if isinstance(exc, OSError) else exc}") from None
-    return parse_scenario(text, str(path), path.stem)
+        data = read_toml(path)
+    except InputFileError as exc:
+        raise ScenarioError(str(path), "", exc.problem) from None
+    return _Reader(str(path)).scenario(data, path.stem)
