@@ -51,8 +51,10 @@ RESERVED_NAMES = frozenset(FUNCTIONS) | frozenset(CONSTANTS)
 MAX_LENGTH = 10_000
 """Characters of one formula."""
 MAX_TOKENS = 1_000
-"""Numbers, names, operators and brackets of one formula: a 150-term Fourier series. Python's
-parser nests one level per term of a sum, and recursion-limit headroom decides this bound."""
+"""Numbers, names, operators and brackets of one formula: a 90-term Fourier series or a
+degree-160 polynomial, the largest of which build into a reference in about a second. It
+also keeps Python's parser, which nests one level per term of a sum, far from its
+recursion limit."""
 MAX_NESTING = 32
 """Brackets, calls, powers and signs inside one another (a realistic formula needs < 10);
 sympy's differentiation and printing recurse about ten frames per level."""
@@ -66,6 +68,7 @@ and so is the numeric factor of a power of a product ((2*t)**n is 2**n * t**n)."
 
 _FLOAT_MAX = int(sys.float_info.max)
 _DECIMAL = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NON_ASCII = re.compile(r"[^\x00-\x7f]")
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
 _MAX_NUMBER_LENGTH = 400  # characters of one number literal (a float has at most ~330)
 _OPERATORS = frozenset({"(", ")", ",", "+", "-", "*", "/", "**"})
@@ -173,9 +176,7 @@ def expression_size(expression: sp.Expr, limit: int | None = None) -> int:
 def _scan(source: str) -> str | None:
     """The first limit ``source`` breaks, found from its tokens before it is parsed."""
     if not source.isascii():
-        for character in set(source):
-            if character.isascii():
-                continue
+        for character in dict.fromkeys(_NON_ASCII.findall(source)):  # in order of appearance
             if unicodedata.category(character)[0] == "C":
                 return f"invisible or control character U+{ord(character):04X}"
             normal = unicodedata.normalize("NFKC", character)
@@ -302,13 +303,10 @@ class _Builder:
         raise ExpressionError(f"{quote(self.snippet(node))} is not allowed ({_ALLOWED}) in {self.where}")
 
     def constant(self, node: ast.Constant) -> sp.Expr:
-        value = node.value
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(node, "not a number")
-        if isinstance(value, float) and not math.isfinite(value) or abs(value) > _FLOAT_MAX:
+        try:  # exact: 0.5 is 1/2, not a binary float
+            return exact_number(node.value)
+        except ExpressionError:
             self.fail(node, "beyond the floating-point range")
-        # Rational of the decimal text keeps 0.5 exactly 1/2 instead of a binary float.
-        return sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
 
     def name(self, node: ast.Name) -> sp.Expr:
         if node.id in self.names:

@@ -40,12 +40,12 @@ _BOM = "\ufeff"
 # Strings and comments, removed (keeping their line breaks) before brackets and dots are
 # counted, so that a "[" or "." inside a string never counts.
 _STRINGS_AND_COMMENTS = re.compile(r'''
-      """(?:[^"\\]|\\[\s\S]|"{1,2}(?!"))*"""(?:"{1,2}(?!"))?
+      """(?:[^"\\]++|\\[\s\S]|"{1,2}(?!"))*+"""(?:"{1,2}(?!"))?
     | \'\'\'[\s\S]*?\'\'\'(?:'{1,2}(?!'))?
-    | "(?:[^"\\\n]|\\[^\n])*"
-    | '[^'\n]*'
-    | \#[^\n]*
-''', re.VERBOSE)
+    | "(?:[^"\\\n]++|\\[^\n])*+"
+    | '[^'\n]*+'
+    | \#[^\n]*+
+''', re.VERBOSE)  # possessive (*+): a long unterminated string costs no backtracking memory
 _BRACKETS = re.compile(r"[\[\]{}]")
 
 

@@ -50,7 +50,8 @@ class WaypointReference(Reference):
         self.points = points
         self.boundary = boundary
         try:
-            self._spline = CubicSpline(points[:, 0], points[:, 1:], bc_type=boundary, extrapolate=False)
+            with np.errstate(all="ignore"):  # an overflow is reported below
+                self._spline = CubicSpline(points[:, 0], points[:, 1:], bc_type=boundary, extrapolate=False)
         except ValueError as exc:  # not reached after the checks above; kept so scipy's wording is never bare
             _fail("points", f"no cubic spline through these points: {exc}")
         if not np.isfinite(self._spline.c).all():
