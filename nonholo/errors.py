@@ -43,3 +43,17 @@ class FormationError(NonholoInputError):
         self.robot, self.field, self.problem = robot, field, problem
         where = f"robot {robot!r}: {field}: " if robot is not None else (f"{field}: " if field else "")
         super().__init__(f"{where}{problem}")
+
+
+class InputFileError(NonholoInputError):
+    """A file or text that cannot be read as input (TOML) within the limits: unreadable,
+    too large, not UTF-8, nested too deeply or not valid TOML (``nonholo.tomlfile``).
+
+    ``source`` is the file (or "<scenario>"), ``problem`` what is wrong; readers of a
+    schema re-raise it as their own error with ``problem``.
+    """
+
+    def __init__(self, source: str, problem: str):
+        self.source = source
+        self.problem = problem
+        super().__init__(f"{source}: {problem}")

@@ -117,12 +117,12 @@ def test_parameters_are_exact_and_power_caret(tmp_path):
     (CHAINED_2_4.replace('u2 = ["0", "1", "0", "0"]', 'u2 = ["0", "1", "0"]'),
      "fields.u2: has 3 components but there are 4 states (z1, z2, z3, z4)"),
     (CHAINED_2_4 + '[parameters]\nL = "abc"\n',
-     "parameters.L: expected a number, got 'abc'"),
+     "parameters.L: expected a finite number, got str 'abc'"),
     (CHAINED_2_4.replace('"z2", "z3"]', '"__import__(\'os\')", "z3"]'),
      "fields.u1[3]: unknown function '__import__'"),
     (CHAINED_2_4.replace('u2 = ["0", "1", "0", "0"]', ''),
      "fields: no vector field for input 'u2'"),
-    ("states = [\n", "invalid TOML"),
+    ("states = [\n", "not valid TOML"),
 ])
 def test_user_file_errors_are_one_line_and_exit_2(tmp_path, capsys, text, message):
     path = write(tmp_path, text)

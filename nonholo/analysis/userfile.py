@@ -10,25 +10,29 @@
     L = 0.5
 
 Every problem is reported as one ``SystemFileError`` whose message names the file and the
-offending entry, because the CLI prints it as a single line.
+offending entry, because the CLI prints it as a single line. The file is read within the
+limits of ``nonholo.tomlfile`` and every formula within those of ``nonholo.expressions``;
+a system has at most ``MAX_DIMENSION`` states, inputs and outputs.
 """
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import sympy as sp
 
-from nonholo.errors import ExpressionError
-from nonholo.expressions import RESERVED_NAMES, parse_expression
+from nonholo.errors import ExpressionError, InputFileError, NonholoInputError
+from nonholo.expressions import check_name, exact_number, parse_expression
+from nonholo.tomlfile import describe_value, read_toml
 from .system import ControlSystem
 
 _KNOWN_KEYS = frozenset({"name", "description", "states", "inputs", "fields", "drift",
                          "outputs", "parameters"})
+MAX_DIMENSION = 32
+"""States, inputs or outputs of one user system (symbolic analysis of more is hopeless)."""
 
 
-class SystemFileError(ValueError):
+class SystemFileError(NonholoInputError):
     """A user system file that cannot be read as a control system."""
 
 
@@ -36,13 +40,9 @@ def load_system_file(path: str | Path) -> ControlSystem:
     """The ControlSystem described by the TOML file at ``path``."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise SystemFileError(f"{path}: cannot read file: {error.strerror}") from None
-    except UnicodeDecodeError:
-        raise SystemFileError(f"{path}: not a UTF-8 text file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise SystemFileError(f"{path}: invalid TOML: {error}") from None
+        data = read_toml(path)
+    except InputFileError as error:
+        raise SystemFileError(str(error)) from None
     try:
         return system_from_mapping(data, default_name=path.stem)
     except SystemFileError as error:
@@ -53,7 +53,8 @@ def system_from_mapping(data: Mapping, default_name: str) -> ControlSystem:
     """Validate the parsed TOML table and build the system."""
     unknown = sorted(set(data) - _KNOWN_KEYS)
     if unknown:
-        raise SystemFileError(f"unknown key {unknown[0]!r} (allowed: {', '.join(sorted(_KNOWN_KEYS))})")
+        raise SystemFileError(f"unknown key {describe_value(unknown[0], typed=False)} "
+                              f"(allowed: {', '.join(sorted(_KNOWN_KEYS))})")
     state_names = _names(data, "states")
     input_names = _names(data, "inputs")
     parameters = _parameters(data.get("parameters", {}))
@@ -74,33 +75,35 @@ def system_from_mapping(data: Mapping, default_name: str) -> ControlSystem:
 def _text(data: Mapping, key: str, default: str) -> str:
     value = data.get(key, default)
     if not isinstance(value, str):
-        raise SystemFileError(f"{key}: expected a string, got {value!r}")
+        raise SystemFileError(f"{key}: expected a string, got {describe_value(value)}")
     return value
 
 
 def _names(data: Mapping, key: str) -> list[str]:
     names = data.get(key)
     if not isinstance(names, list) or not names:
-        raise SystemFileError(f"{key}: expected a non-empty list of names")
-    for name in names:
-        if not isinstance(name, str) or not name.isidentifier():
-            raise SystemFileError(f"{key}: {name!r} is not a valid name")
-        if name in RESERVED_NAMES:
-            raise SystemFileError(f"{key}: {name!r} is reserved (a function or constant name)")
+        raise SystemFileError(f"{key}: expected a non-empty list of names, got {describe_value(names)}")
+    if len(names) > MAX_DIMENSION:
+        raise SystemFileError(f"{key}: {len(names):,} names, at most {MAX_DIMENSION}")
+    for index, name in enumerate(names, start=1):
+        problem = check_name(name)
+        if problem:
+            raise SystemFileError(f"{key}[{index}]: {problem}")
     return names
 
 
 def _parameters(table) -> dict[str, sp.Expr]:
     if not isinstance(table, Mapping):
-        raise SystemFileError("parameters: expected a table of name = number")
+        raise SystemFileError(f"parameters: expected a table of name = number, got {describe_value(table)}")
     values = {}
     for name, value in table.items():
-        if not name.isidentifier() or name in RESERVED_NAMES:
-            raise SystemFileError(f"parameters: {name!r} is not a valid parameter name")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SystemFileError(f"parameters.{name}: expected a number, got {value!r}")
-        # repr keeps the decimal the user wrote, so 0.1 becomes exactly 1/10
-        values[name] = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
+        problem = check_name(name)
+        if problem:
+            raise SystemFileError(f"parameters: {problem}")
+        try:  # exact: 0.1 becomes 1/10
+            values[name] = exact_number(value)
+        except ExpressionError as error:
+            raise SystemFileError(f"parameters.{name}: {error}") from None
     return values
 
 
@@ -115,10 +118,11 @@ def _check_distinct(*groups: Sequence[str]) -> None:
 def _fields(table, input_names: Sequence[str], state_names: Sequence[str],
             scope: Mapping[str, sp.Expr]) -> tuple[sp.Matrix, ...]:
     if not isinstance(table, Mapping):
-        raise SystemFileError("fields: expected a table with one vector field per input")
+        raise SystemFileError(f"fields: expected a table with one vector field per input, got {describe_value(table)}")
     extra = sorted(set(table) - set(input_names))
     if extra:
-        raise SystemFileError(f"fields.{extra[0]}: {extra[0]!r} is not a declared input")
+        shown = describe_value(extra[0], typed=False)
+        raise SystemFileError(f"fields: {shown} is not a declared input (inputs: {', '.join(input_names)})")
     missing = [name for name in input_names if name not in table]
     if missing:
         raise SystemFileError(f"fields: no vector field for input {missing[0]!r}")
@@ -129,7 +133,8 @@ def _fields(table, input_names: Sequence[str], state_names: Sequence[str],
 def _vector(components, where: str, state_names: Sequence[str],
             scope: Mapping[str, sp.Expr]) -> sp.Matrix:
     if not isinstance(components, list):
-        raise SystemFileError(f"{where}: expected a list of {len(state_names)} expressions")
+        raise SystemFileError(f"{where}: expected a list of {len(state_names)} expressions, got "
+                              f"{describe_value(components)}")
     if len(components) != len(state_names):
         raise SystemFileError(f"{where}: has {len(components)} components but there are "
                               f"{len(state_names)} states ({', '.join(state_names)})")
@@ -138,7 +143,9 @@ def _vector(components, where: str, state_names: Sequence[str],
 
 def _expressions(items, where: str, scope: Mapping[str, sp.Expr]) -> list[sp.Expr]:
     if not isinstance(items, list):
-        raise SystemFileError(f"{where}: expected a list of expressions")
+        raise SystemFileError(f"{where}: expected a list of expressions, got {describe_value(items)}")
+    if len(items) > MAX_DIMENSION:
+        raise SystemFileError(f"{where}: {len(items):,} expressions, at most {MAX_DIMENSION}")
     expressions = []
     for index, item in enumerate(items, start=1):
         text = str(item) if isinstance(item, (int, float)) and not isinstance(item, bool) else item

@@ -3,17 +3,26 @@
 Each sub-command lives in its own module of this package and exposes
 ``register(subparsers)``; modules are discovered here so that adding a command never
 edits this file. Exit codes: 0 success, 1 run-time failure, 2 bad input.
+
+``main`` is also the last resort for what a command does not handle itself: a
+``NonholoInputError`` is one line and exit 2, a ``SimulationError`` one line and exit 1,
+Ctrl-C exit 130, and a reader that closes the pipe (``nonholo run … | head -2``) ends the
+command quietly with exit 141, as a Unix tool killed by SIGPIPE does (the recipe of the
+Python documentation, "Note on SIGPIPE": the rest of the output goes to the null device).
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,12 +46,47 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "handler", None) is None:
-        parser.print_help()
+    from nonholo.errors import NonholoInputError, SimulationError
+
+    prog = "nonholo"
+    try:
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            if getattr(args, "handler", None) is None:
+                parser.print_help()
+                return EXIT_BAD_INPUT
+            prog = f"nonholo {args.command}"
+            return int(args.handler(args) or EXIT_OK)
+        finally:
+            sys.stdout.flush()  # a closed pipe shows here, not at exit (also after --help's SystemExit)
+    except BrokenPipeError:
+        _discard_stdout()
+        return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except NonholoInputError as exc:
+        _error_line(prog, exc)
         return EXIT_BAD_INPUT
-    return int(args.handler(args) or EXIT_OK)
+    except SimulationError as exc:
+        _error_line(prog, exc)
+        return EXIT_FAILURE
+
+
+def _error_line(prog: str, exc: Exception) -> None:
+    message = " ".join(str(exc).split())  # one line, whatever the message holds
+    print(f"{prog}: error: {message}", file=sys.stderr)
+
+
+def _discard_stdout() -> None:
+    """Point standard output at the null device, so that flushing what is left at exit
+    raises no second BrokenPipeError."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (AttributeError, OSError, ValueError):  # no file descriptor (a captured or replaced stream)
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -2,13 +2,15 @@
 times, the feedforward table the simulator consumes, and a feasibility check."""
 from __future__ import annotations
 
+import numbers
 from abc import ABC, abstractmethod
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from nonholo.errors import InfeasibleReferenceError
+from nonholo.errors import InfeasibleReferenceError, ScenarioError
 from nonholo.references.feedforward import feedforward
+from nonholo.tomlfile import describe_value
 
 FORWARD, BACKWARD = 1, -1
 DIRECTIONS = {"forward": FORWARD, "backward": BACKWARD}
@@ -24,8 +26,10 @@ class Reference(ABC):
     kind: str = "reference"
 
     def __init__(self, direction: int = FORWARD, default_duration: float | None = None):
-        if direction not in (FORWARD, BACKWARD):
-            raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}")
+        if not (isinstance(direction, numbers.Integral) and not isinstance(direction, bool)
+                and direction in (FORWARD, BACKWARD)):
+            raise ScenarioError(f"{self.kind} reference", "direction",
+                                f"expected +1 (forward) or -1 (backward), got {describe_value(direction)}")
         self.direction = direction
         self.default_duration = default_duration
 

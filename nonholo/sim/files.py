@@ -85,6 +85,7 @@ from nonholo.control.posture import POSTURE_CONTROLLERS
 from nonholo.control.registry import CONTROLLERS
 from nonholo.errors import NonholoInputError, ScenarioError
 from nonholo.errors import ExpressionError, FormationError
+from nonholo.tomlfile import describe_value
 from nonholo.sim.scenario import (CHANGE_MODES, DIRECTIONS, FORMATION_LAWS, METHODS, OUTPUTS, SEPARATION_BEARING,
                                   Change, Follower, Robot, Scenario)
 
@@ -109,10 +110,6 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _describe(value) -> str:
-    return f"{type(value).__name__} {value!r}" if not isinstance(value, (dict, list)) else type(value).__name__
-
-
 class _Reader:
     """Validates one parsed file; every error names the file and the field."""
 
@@ -124,7 +121,7 @@ class _Reader:
 
     def table(self, data, field: str, allowed: set[str] | None = None) -> dict:
         if not isinstance(data, dict):
-            self.fail(field, f"expected a table, got {_describe(data)}")
+            self.fail(field, f"expected a table, got {describe_value(data)}")
         if allowed is not None:
             unknown = sorted(set(data) - allowed)
             if unknown:
@@ -134,21 +131,21 @@ class _Reader:
 
     def number(self, value, field: str, positive: bool = False) -> float:
         if not _is_number(value):
-            self.fail(field, f"expected a finite number, got {_describe(value)}")
+            self.fail(field, f"expected a finite number, got {describe_value(value)}")
         if positive and value <= 0:
-            self.fail(field, f"expected a positive number, got {value!r}")
+            self.fail(field, f"expected a positive number, got {describe_value(value, typed=False)}")
         return float(value)
 
     def numbers(self, value, field: str, count: int) -> tuple[float, ...]:
         if not (isinstance(value, list) and len(value) == count and all(_is_number(v) for v in value)):
-            self.fail(field, f"expected a list of {count} finite numbers, got {value!r}")
+            self.fail(field, f"expected a list of {count} finite numbers, got {describe_value(value)}")
         return tuple(float(v) for v in value)
 
     def string(self, value, field: str, choices=None) -> str:
         if not isinstance(value, str):
-            self.fail(field, f"expected a string, got {_describe(value)}")
+            self.fail(field, f"expected a string, got {describe_value(value)}")
         if choices is not None and value not in choices:
-            self.fail(field, f"unknown value {value!r} (valid: {', '.join(choices)})")
+            self.fail(field, f"unknown value {describe_value(value, typed=False)} (valid: {', '.join(choices)})")
         return value
 
     def reference(self, data) -> references.Reference:
@@ -187,7 +184,7 @@ class _Reader:
             table = self.table(value, field)
             return {name: self.number(v, f"{field}.{name}") for name, v in table.items()}
         if not (isinstance(value, list) and len(value) >= 2):
-            self.fail(field, f"expected a list of at least two [t, x, y] points, got {_describe(value)}")
+            self.fail(field, f"expected a list of at least two [t, x, y] points, got {describe_value(value)}")
         return [self.numbers(p, f"{field}[{i}]", 3) for i, p in enumerate(value)]
 
     def angle(self, value, field: str) -> float:
@@ -198,15 +195,15 @@ class _Reader:
             try:
                 number = float(parse_expression(value, {}))
             except (ExpressionError, TypeError) as exc:
-                self.fail(field, f"expected a number or an expression of pi, got {value!r} ({exc})")
+                self.fail(field, f"expected a number or an expression of pi, got {describe_value(value)} ({exc})")
             if not math.isfinite(number):
-                self.fail(field, f"expected a finite angle, got {value!r}")
+                self.fail(field, f"expected a finite angle, got {describe_value(value)}")
             return number
         return self.number(value, field)
 
     def pose(self, value, field: str) -> tuple[float, float, float]:
         if not (isinstance(value, list) and len(value) == 3):
-            self.fail(field, f"expected a list of 3 finite numbers [x, y, theta], got {_describe(value)}")
+            self.fail(field, f"expected a list of 3 finite numbers [x, y, theta], got {describe_value(value)}")
         return self.number(value[0], f"{field}[0]"), self.number(value[1], f"{field}[1]"), \
             self.angle(value[2], f"{field}[2]")
 
@@ -261,7 +258,7 @@ class _Reader:
                     self.fail(f"{where}.{field}", "not a field of a separation-separation follower (it has leaders and l = [l1, l2])")
             value = data["leaders"]
             if not (isinstance(value, list) and len(value) == 2 and all(isinstance(v, str) for v in value)):
-                self.fail(f"{where}.leaders", f"expected two robot names [a, b], got {value!r}")
+                self.fail(f"{where}.leaders", f"expected two robot names [a, b], got {describe_value(value)}")
             leaders = tuple(value)
             targets = self.numbers(data["l"], f"{where}.l", 2)
         gains = self.table(data.get("gains", {}), f"{where}.gains", {"k1", "k2"})
@@ -326,7 +323,7 @@ class _Reader:
             if field_name in simulation:
                 value = simulation[field_name]
                 if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-                    self.fail(f"simulation.{field_name}", f"expected a positive integer, got {_describe(value)}")
+                    self.fail(f"simulation.{field_name}", f"expected a positive integer, got {describe_value(value)}")
                 kwargs[field_name] = value
         if "dt" in simulation and "steps" in simulation:
             self.fail("simulation.steps", "give dt or steps, not both")
@@ -334,7 +331,7 @@ class _Reader:
             kwargs["method"] = self.string(simulation["method"], "simulation.method", METHODS)
         if "piconet" in options:
             if not isinstance(options["piconet"], bool):
-                self.fail("formation.piconet", f"expected true or false, got {_describe(options['piconet'])}")
+                self.fail("formation.piconet", f"expected true or false, got {describe_value(options['piconet'])}")
             kwargs["piconet"] = options["piconet"]
         if "sin_floor" in options:
             kwargs["sin_floor"] = self.number(options["sin_floor"], "formation.sin_floor", positive=True)
@@ -353,18 +350,24 @@ class _Reader:
 
 def parse_scenario(text: str, source: str = "<scenario>", name: str = "scenario") -> Scenario:
     """A Scenario from TOML text; ``ScenarioError`` (one line) on any problem."""
+    from nonholo.errors import InputFileError
+    from nonholo.tomlfile import parse_toml
+
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
+        data = parse_toml(text, source)
+    except InputFileError as exc:
+        raise ScenarioError(source, "", exc.problem) from None
     return _Reader(source).scenario(data, name)
 
 
 def load_scenario(path) -> Scenario:
-    """A Scenario from a TOML file."""
+    """A Scenario from a TOML file, read within the limits of ``nonholo.tomlfile``."""
+    from nonholo.errors import InputFileError
+    from nonholo.tomlfile import read_toml
+
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(str(path), "", f"cannot read: {exc.strerror if isinstance(exc, OSError) else exc}") from None
-    return parse_scenario(text, str(path), path.stem)
+        data = read_toml(path)
+    except InputFileError as exc:
+        raise ScenarioError(str(path), "", exc.problem) from None
+    return _Reader(str(path)).scenario(data, path.stem)
