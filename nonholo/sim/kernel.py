@@ -12,8 +12,9 @@ R robots of one graph, listed so that ``order`` visits parents before children; 
 * ``rows``    (r, 10): the reference at every stage time (``REF_COLUMNS``); output step k
   with m_k sub-steps owns rows ``row_start[k] … row_start[k] + 2 m_k`` (times t_k + j h/2,
   h = dt/m_k), the last one shared with step k + 1
-* ``targets`` (r, 4, R): follower targets z1_d, z2_d and their rates at the same stage times;
-  ``offsets`` (2, R, B) per-copy constant offsets added to z1_d, z2_d (sweeps of l, φ)
+* ``targets`` (r, 4, R): follower targets z1_d, z2_d and their rates at the same stage times
+  (one row when no follower's targets change); ``offsets`` (2, R, B) per-copy constant offsets
+  added to z1_d, z2_d (sweeps of l, φ)
 * topology: ``kinds`` (R,) ``ROOT_A``/``ROOT_B`` (root under law A or B), ``SEPARATION_BEARING``,
   ``SEPARATION_SEPARATION``; ``parents`` (2, R); ``feeds`` (R,) 1 where a robot has children
 * ``branch``  (R, B): each l–φ bearing on its continuous 2π branch
@@ -328,6 +329,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                             law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
                         err1, err2 = root_errors(posture_b, fields, r, b, x, y, theta, ref)
                 elif followers:
+                    target_row = target_row if targets.shape[0] > 1 else 0   # one row: constant targets
                     z1_d = targets[target_row, 0, r] + offsets[0, r, b]
                     z2_d = targets[target_row, 1, r] + offsets[1, r, b]
                     if kind == SEPARATION_BEARING:
@@ -510,7 +512,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     for s in range(4):
                         weight = 0.0 if s == 0 else (half if s < 3 else h)
                         sx, sy, st = x + weight * dx, y + weight * dy, theta + weight * dtheta
-                        tr = row + (s + 1) // 2
+                        tr = row + (s + 1) // 2 if targets.shape[0] > 1 else 0   # one row: constant targets
                         target = (targets[tr, 0, r] + o1, targets[tr, 1, r] + o2, targets[tr, 2, r], targets[tr, 3, r])
                         dx, dy, dtheta, v, omega = follower_stage(
                             kind, sx, sy, st, parent_stage(stage_pose, stage_command, s, p1, b),

@@ -174,6 +174,9 @@ class Group:
         self.robots = robots
 
     def targets(self, times: np.ndarray) -> np.ndarray:
+        """Follower targets at ``times`` (one row if none of them changes)."""
+        if not any(isinstance(r, Follower) and r.changes for r in self.robots):
+            times = times[:1]
         table = np.zeros((times.size, 4, len(self.robots)))
         for j, robot in enumerate(self.robots):
             if isinstance(robot, Follower):
@@ -331,9 +334,8 @@ def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
     """Refuse, before allocating, a run whose arrays would not fit (an estimate)."""
     samples = scenario.n_steps + 1
     estimate = 8.0 * robots * ((kn.REC_COUNT * samples if record else 0) + kn.STAT_COUNT + 64)
-    if scenario.reference is not None:
-        substeps = scenario.substeps or 1
-        estimate += 8.0 * 10 * 2 * substeps * samples
+    substeps = scenario.substeps or 1   # the reference rows at every stage time
+    estimate += 8.0 * 10 * 2 * substeps * samples
     if estimate > MAX_BYTES:
         raise NonholoInputError(
             f"this run would need about {estimate / 2**30:.3g} GiB ({robots} robots x {samples} samples"
