@@ -20,7 +20,13 @@ def register(subparsers) -> None:
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--plot", metavar="FILE", help="write a figure (path, error, v, omega) to FILE")
-    parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")
+    parser.add_argument("--out", metavar="DIR",
+                        help="write result.json, trajectories.csv (tidy: a row per robot and sample, units in the "
+                             "header), plot.png and, for formations and posture runs, formation.gif to DIR")
+    parser.add_argument("--every", type=int, default=1, metavar="N",
+                        help="keep every N-th sample in trajectories.csv (default: all)")
+    parser.add_argument("--animate", metavar="FILE", help="write an animation of the run: FILE.gif, or FILE.mp4 "
+                                                           "when ffmpeg is installed")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=handle)
 
@@ -34,7 +40,9 @@ def handle(args: argparse.Namespace) -> int:
         scenario = load_scenario(examples.resolve(args.scenario))
         from nonholo.sim.simulator import simulate
 
-        result = simulate(scenario, record=bool(args.plot or args.out or not args.json),
+        if args.every < 1:
+            raise NonholoInputError(f"--every must be a positive integer, got {args.every}")
+        result = simulate(scenario, record=bool(args.plot or args.out or args.animate or not args.json),
                           progress=False if args.quiet else None)
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
@@ -47,8 +55,11 @@ def handle(args: argparse.Namespace) -> int:
         if args.plot:
             result.plot(path=args.plot)
         if args.out:
-            for written in write_outputs(result, summary, Path(args.out)):
+            for written in write_outputs(result, summary, Path(args.out), args.every, progress=not args.quiet):
                 print(f"wrote {written}", file=sys.stderr)
+        if args.animate:
+            result.write_gif(args.animate, progress=not args.quiet and sys.stderr.isatty())
+            print(f"wrote {args.animate}", file=sys.stderr)
     except (OSError, ValueError) as exc:  # unwritable place, unknown image format
         print(f"nonholo run: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE
@@ -60,17 +71,17 @@ def handle(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def write_outputs(result, summary: dict, out: Path) -> list[Path]:
+def write_outputs(result, summary: dict, out: Path, every: int = 1, progress: bool = False) -> list[Path]:
     """result.json, trajectories.csv (tidy: one row per robot and sample, units in the
     header), plot.png and, for formations and posture runs, formation.gif."""
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "result.json", out / "trajectories.csv", out / "plot.png"]
     written[0].write_text(json.dumps(summary, indent=2, allow_nan=False))
-    result.write_csv(written[1])
+    result.write_csv(written[1], every=every)
     result.plot(path=written[2])
     scenario = result.scenario
     if scenario.followers or any(r.posture for r in scenario.roots):
-        written.append(result.write_gif(out / "formation.gif"))
+        written.append(result.write_gif(out / "formation.gif", progress=progress and sys.stderr.isatty()))
     return written
 
 

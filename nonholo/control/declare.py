@@ -174,6 +174,11 @@ class ControlLaw:
         return ControllerConfig(self, variant, MappingProxyType(resolved), xi0)
 
 
+    def __repr__(self) -> str:
+        variants = f", variants {', '.join(self.variants)}" if len(self.variants) > 1 else ""
+        return f"<{self.kind} law {self.name!r}: gains {', '.join(self.accepted_gains) or '-'}{variants}>"
+
+
 TrackingController = ControlLaw  # the former name
 
 
@@ -210,6 +215,16 @@ class ControllerConfig:
     def stiffness(self, v_d_max: float, omega_d_max: float) -> float:
         """The fastest closed-loop rate (1/s) the law can command; sets sub-stepping."""
         return float(self.controller.stiffness(self.gains, v_d_max, omega_d_max))
+
+    def __repr__(self) -> str:
+        """As it would be written: ``controller('kanayama', kx=10, ky=0.0064, ktheta=0.16)``."""
+        args = [repr(self.name)]
+        if len(self.controller.variants) > 1:
+            args.append(f"variant={self.variant!r}")
+        args += [f"{name}={value:g}" for name, value in self.gains.items()]
+        if self.xi0 is not None:
+            args.append(f"{self.controller.initial_gain}={self.xi0:g}")
+        return f"controller({', '.join(args)})"
 
     def describe(self) -> dict:
         out = {"controller": self.name, "gains": dict(self.gains)}

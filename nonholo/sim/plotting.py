@@ -1,6 +1,8 @@
 """Figures of a simulation result (matplotlib, headless-safe)."""
 from __future__ import annotations
 
+import sys
+
 import matplotlib
 
 if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
@@ -72,7 +74,7 @@ def plot_result(result, path=None, robots=None, member: int = 0, max_robots: int
     return fig
 
 
-def _robot_marker(ax, x, y, theta, color, size=0.6):
+def _robot_marker(ax, x, y, theta, color, size=0.6):  # noqa: D103
     """A triangle pointing along the heading, centred on the axle midpoint."""
     c, s = np.cos(theta), np.sin(theta)
     body = np.array([[1.2, 0.0], [-0.6, 0.6], [-0.6, -0.6]]) * size
@@ -138,16 +140,24 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
     return fig
 
 
-def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0, progress: bool = False):
-    """Write an animated GIF: robots as triangles, trails of ``trail`` seconds, links."""
-    from matplotlib.animation import FuncAnimation, PillowWriter
+def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0,
+            progress: bool = False, max_robots: int = 12):
+    """Write an animation (GIF; MP4 when ``path`` ends in .mp4 and ffmpeg is installed):
+    robots as labelled triangles with trails of ``trail`` seconds, formation links, the
+    reference; ``progress`` shows a bar while frames are rendered."""
+    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 
     formation = result.formations[member]
     t = result.t
-    x, y, theta = (result.trajectory(f, member) for f in ("x", "y", "theta"))
+    shown = list(range(min(max_robots, len(formation.robots))))
+    x, y, theta = (result.trajectory(f, member)[shown] for f in ("x", "y", "theta"))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    fig, ax = plt.subplots(figsize=(6, 6))
-    margin = 2.0
+    span = max(np.ptp(x), np.ptp(y), 1.0)
+    margin = 0.06 * span + 1.0
+    width, height = np.ptp(x) + 2 * margin, np.ptp(y) + 2 * margin
+    scale = 6.0 / max(width, height)
+    fig, ax = plt.subplots(figsize=(max(3.0, width * scale) + 0.8, max(3.0, height * scale) + 0.6),
+                           layout="constrained")
     ax.set(xlim=(x.min() - margin, x.max() + margin), ylim=(y.min() - margin, y.max() + margin), aspect="equal",
            xlabel="x (m)", ylabel="y (m)")
     ax.grid(True, alpha=0.3)
@@ -155,28 +165,43 @@ def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, tra
         ax.plot(result.reference_rows[:, 1], result.reference_rows[:, 2], "k--", lw=0.8)
     indices = np.linspace(0, t.size - 1, frames).astype(int)
     trail_steps = max(1, int(trail / formation.dt))
-    links = _links(formation)
+    links = [(p, c) for p, c in _links(formation) if p in shown and c in shown]
+    size = 0.025 * span
 
     def draw(k):
-        for artist in list(ax.patches) + [ln for ln in ax.lines if ln.get_gid() == "dynamic"]:
+        for artist in list(ax.patches) + list(ax.texts) + [ln for ln in ax.lines if ln.get_gid() == "dynamic"]:
             artist.remove()
-        for i, robot in enumerate(formation.robots):
+        for i in shown:
             color = colors[i % len(colors)]
             start = max(0, k - trail_steps)
             ln, = ax.plot(x[i, start:k + 1], y[i, start:k + 1], color=color, lw=1)
             ln.set_gid("dynamic")
-            _robot_marker(ax, x[i, k], y[i, k], theta[i, k], color)
+            _robot_marker(ax, x[i, k], y[i, k], theta[i, k], color, size)
+            ax.text(x[i, k] + 1.5 * size, y[i, k] + 1.5 * size, formation.robots[i].name, fontsize=7, color=color)
         for parent, child in links:
             d = formation.robots[child].d
             ln, = ax.plot([x[parent, k], x[child, k] + d * np.cos(theta[child, k])],
                           [y[parent, k], y[child, k] + d * np.sin(theta[child, k])], color="0.4", lw=0.7)
             ln.set_gid("dynamic")
-        ax.set_title(f"{formation.name}: t = {t[k]:.1f} s")
+        ax.set_title(f"{formation.name}: t = {t[k]:.1f} s", fontsize=9)
         return []
 
+    mp4 = str(path).lower().endswith(".mp4")
+    if mp4 and not FFMpegWriter.isAvailable():
+        raise ValueError("MP4 needs ffmpeg, which is not installed: write a .gif instead")
+    writer = FFMpegWriter(fps=fps) if mp4 else PillowWriter(fps=fps)
     animation = FuncAnimation(fig, lambda j: draw(indices[j]), frames=len(indices), blit=False)
-    animation.save(path, writer=PillowWriter(fps=fps))
-    plt.close(fig)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(indices), unit="frame", desc=f"animating {path}", file=sys.stderr, leave=False)
+    try:
+        animation.save(path, writer=writer, progress_callback=(lambda i, n: bar.update(1)) if bar else None)
+    finally:
+        if bar is not None:
+            bar.close()
+        plt.close(fig)
     return path
 
 

@@ -98,6 +98,11 @@ class Robot:
     def posture(self) -> bool:
         return self.goal is not None
 
+    def __repr__(self) -> str:
+        goal = f", goal={self.goal}" if self.goal is not None else ""
+        limits = "".join(f", {k}={getattr(self, k):g}" for k in ("v_max", "omega_max") if math.isfinite(getattr(self, k)))
+        return f"Robot({self.name!r}, {self.controller!r}, start={self.start}{goal}{limits})"
+
     @property
     def parents(self) -> tuple[str, ...]:
         return ()
@@ -150,6 +155,12 @@ class Follower:
     @property
     def outputs(self) -> tuple[str, str]:
         return OUTPUTS[self.law]
+
+    def __repr__(self) -> str:
+        targets = ", ".join(f"{n}={v:g}" for n, v in zip(self.outputs, self.targets))
+        changes = f", {len(self.changes)} change(s)" if self.changes else ""
+        return (f"Follower({self.name!r}, {self.law} of {', '.join(self.leaders)}: {targets}, d={self.d:g}, "
+                f"k1={self.k1:g}, k2={self.k2:g}{changes})")
 
     @property
     def parents(self) -> tuple[str, ...]:
@@ -267,6 +278,12 @@ class Scenario:
     @property
     def n_steps(self) -> int:
         return max(1, round(self.duration / self.dt))
+
+    def __repr__(self) -> str:
+        reference = f"{self.reference.kind} reference" if self.reference is not None else "no reference"
+        control = f", control every {self.control_period:g} s" if self.control_period else ""
+        return (f"<Scenario {self.name!r}: {reference}, {len(self.roots)} root(s), {len(self.followers)} follower(s), "
+                f"{self.duration:g} s in steps of {self.dt:g} s{control}, {self.method}>")
 
     @property
     def hold_every(self) -> int:
