@@ -396,7 +396,15 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                 stats[SAT_W, r, b] += sat_w
                 stats[SINGULAR, r, b] += singular
                 stats[FIRST_SINGULAR, r, b] = min(stats[FIRST_SINGULAR, r, b], t if singular > 0.0 else np.inf)
-                if recording:
+        if recording:   # a loop of its own: the statistics loop stays small enough to vectorize cheaply
+            for r in range(n_robots):
+                for b in range(n_batch):
+                    if sampled_data:
+                        v, omega = held[HELD_V, r, b], held[HELD_OMEGA, r, b]
+                        singular, sat_v, sat_w = held[HELD_SINGULAR, r, b], held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b]
+                    else:
+                        v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
+                        singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
                     record[REC_X, k, r, b] = state[0, r, b]
                     record[REC_Y, k, r, b] = state[1, r, b]
                     record[REC_THETA, k, r, b] = state[2, r, b]
