@@ -81,6 +81,9 @@ HELD_COUNT = 6
 (I_V, I_OMEGA, I_XI_DOT, I_SINGULAR, I_SAT_V, I_SAT_OMEGA, I_OUT1, I_OUT2, I_ERR1, I_ERR2, I_RATE1, I_RATE2,
  I_SIN_GAMMA) = range(13)
 INSTANT_COUNT = 13
+# The held commands are the first HELD_COUNT rows of an instant, in the same order.
+assert (HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA) == \
+    (I_V, I_OMEGA, I_XI_DOT, I_SINGULAR, I_SAT_V, I_SAT_OMEGA)
 
 # "contract" lets LLVM fuse a*b + c into one FMA instruction (deterministic, and more
 # accurate); no other fast-math relaxations, so NaN/inf semantics and ordering stay IEEE.
@@ -360,18 +363,14 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     instant)
 
     @njit(inline="always", **_OPTIONS)
-    def accumulate(state, instant, held, sampled_data, t, k, kinds, fields, d_max, stats, pair_stats, record,
-                   recording):
-        """Add every robot's sample at output step k (time t) to its statistics and record."""
+    def accumulate(state, instant, t, k, kinds, fields, d_max, stats, pair_stats, record, recording):
+        """Add every robot's sample at output step k (time t) to its statistics and record:
+        its errors and outputs at the state, the command in force (``instant``)."""
         n_robots, n_batch = state.shape[1], state.shape[2]
         for r in range(n_robots):
             for b in range(n_batch):
-                if sampled_data:
-                    v, omega = held[HELD_V, r, b], held[HELD_OMEGA, r, b]
-                    singular, sat_v, sat_w = held[HELD_SINGULAR, r, b], held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b]
-                else:
-                    v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
-                    singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
+                v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
+                singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
                 e = abs(instant[I_ERR1, r, b])
                 delta = e - stats[E_MEAN, r, b]
                 mean = stats[E_MEAN, r, b] + delta / (k + 1.0)
@@ -399,18 +398,12 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         if recording:   # a loop of its own: the statistics loop stays small enough to vectorize cheaply
             for r in range(n_robots):
                 for b in range(n_batch):
-                    if sampled_data:
-                        v, omega = held[HELD_V, r, b], held[HELD_OMEGA, r, b]
-                        singular, sat_v, sat_w = held[HELD_SINGULAR, r, b], held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b]
-                    else:
-                        v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
-                        singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
                     record[REC_X, k, r, b] = state[0, r, b]
                     record[REC_Y, k, r, b] = state[1, r, b]
                     record[REC_THETA, k, r, b] = state[2, r, b]
                     record[REC_XI, k, r, b] = state[3, r, b]
-                    record[REC_V, k, r, b] = v
-                    record[REC_OMEGA, k, r, b] = omega
+                    record[REC_V, k, r, b] = instant[I_V, r, b]
+                    record[REC_OMEGA, k, r, b] = instant[I_OMEGA, r, b]
                     record[REC_OUT1, k, r, b] = instant[I_OUT1, r, b]
                     record[REC_OUT2, k, r, b] = instant[I_OUT2, r, b]
                     record[REC_ERR1, k, r, b] = instant[I_ERR1, r, b]
@@ -418,8 +411,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     record[REC_RATE1, k, r, b] = instant[I_RATE1, r, b]
                     record[REC_RATE2, k, r, b] = instant[I_RATE2, r, b]
                     record[REC_SIN_GAMMA, k, r, b] = instant[I_SIN_GAMMA, r, b]
-                    record[REC_SINGULAR, k, r, b] = singular
-                    record[REC_SATURATED, k, r, b] = sat_v + 2.0 * sat_w
+                    record[REC_SINGULAR, k, r, b] = instant[I_SINGULAR, r, b]
+                    record[REC_SATURATED, k, r, b] = instant[I_SAT_V, r, b] + 2.0 * instant[I_SAT_OMEGA, r, b]
         if followers:
             for r in range(n_robots):
                 if kinds[r] == SEPARATION_SEPARATION:
@@ -573,14 +566,16 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             ref = row_values(rows, row)
             evaluate_at(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
                         instant)
-            if sampled_data and k % hold_every == 0:
+            if sampled_data:   # a control instant holds the new commands; between them they stay in force
+                refresh = k % hold_every == 0
                 for r in range(n_robots):
                     for b in range(n_batch):
-                        held[HELD_V, r, b], held[HELD_OMEGA, r, b] = instant[I_V, r, b], instant[I_OMEGA, r, b]
-                        held[HELD_XI_DOT, r, b], held[HELD_SINGULAR, r, b] = instant[I_XI_DOT, r, b], instant[I_SINGULAR, r, b]
-                        held[HELD_SAT_V, r, b], held[HELD_SAT_OMEGA, r, b] = instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
-            accumulate(state, instant, held, sampled_data, ref[0], k, kinds, fields, d_max, stats, pair_stats, record,
-                       recording)
+                        for field in range(HELD_COUNT):
+                            if refresh:
+                                held[field, r, b] = instant[field, r, b]
+                            else:
+                                instant[field, r, b] = held[field, r, b]
+            accumulate(state, instant, ref[0], k, kinds, fields, d_max, stats, pair_stats, record, recording)
             if k == n_steps:
                 break
             m = substeps[k]
@@ -599,7 +594,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
               pair_stats, record):
         n_robots, n_batch = states.shape[2], states.shape[3]
         instant = np.zeros((INSTANT_COUNT, n_robots, n_batch))
-        held = np.zeros((HELD_COUNT, n_robots, n_batch))
         recording = record.shape[1] != 0
         for k in range(states.shape[0]):
             state = states[k]
@@ -608,8 +602,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             ref = row_values(rows, k)
             evaluate_at(state, fields, limits, ref, targets, k, offsets, kinds, order, parents, branch, sin_floor,
                         instant)
-            accumulate(state, instant, held, False, ref[0], k, kinds, fields, d_max, stats, pair_stats, record,
-                       recording)
+            accumulate(state, instant, ref[0], k, kinds, fields, d_max, stats, pair_stats, record, recording)
 
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
