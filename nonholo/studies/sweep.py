@@ -256,18 +256,22 @@ def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> lis
     if isinstance(base, Follower):
         return [_with_values(base, {n: float(v) for n, v in zip(names, point)})
                 for point in zip(*(g.ravel() for g in grids))]
-    config = base.controller
+    return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
+                                controller=with_gains(base.controller, {n: float(v) for n, v in zip(names, point)}))
+            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+
+
+def with_gains(config, values: dict):
+    """``config`` (a ``ControllerConfig``) with the gains ``values`` changed and the others
+    kept (``xi0`` included; an alias such as ``kp`` replaces the gains it sets)."""
     fixed = dict(config.gains)
     if config.xi0 is not None:
         fixed[config.controller.initial_gain] = config.xi0
     for alias, targets in config.controller.aliases.items():
-        if alias in names:
+        if alias in values:
             for target in targets:
                 fixed.pop(target, None)
-    return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
-                                controller=config.controller.configure(
-                                    {**fixed, **{n: float(v) for n, v in zip(names, point)}}, config.variant))
-            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+    return config.controller.configure({**fixed, **values}, config.variant)
 
 
 @dataclass(frozen=True)
