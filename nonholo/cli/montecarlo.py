@@ -95,8 +95,9 @@ def describe(result) -> str:
         if s["n"] and name.rsplit(".", 1)[1] in ("error_mean", "error_rms", "error_max", "effort", "peak_omega",
                                                  "min_distance"):
             q = s["quantiles"]
-            lines.append(f"{name[:40]:<40} {s['mean']:>10.4g} {q['q05']:>10.4g} {q['q50']:>10.4g} "
-                         f"{q['q95']:>10.4g} {s['n']:>7}")
+            cells = [s["mean"], q["q05"], q["q50"], q["q95"]]
+            lines.append(f"{name[:40]:<40} " + " ".join("      null" if v is None else f"{v:>10.4g}" for v in cells)
+                         + f" {s['n']:>7}")
     lines.append("failures (95 % Wilson interval):")
     for name, f in out["failures"].items():
         lines.append(f"  {name:<10} {f['count']:>7}  p = {f['probability']:.4f}  "

@@ -40,9 +40,9 @@ LOCAL = "local"
 INSTALL_HINT = "pip install 'nonholo[dask]'"
 
 
-def chunk_bounds(count: int, work_per_item: float, seconds: float = CHUNK_SECONDS) -> list[tuple[int, int]]:
+def chunk_bounds(count: int, work_per_item: float, seconds: float | None = None) -> list[tuple[int, int]]:
     """Contiguous ``(start, stop)`` item ranges covering ``range(count)``, as equal as
-    possible, each of about ``seconds`` of nominal work (at least ``MIN_CHUNK_SECONDS`` unless
+    possible, each of about ``seconds`` (default ``CHUNK_SECONDS``) of nominal work (at least ``MIN_CHUNK_SECONDS`` unless
     the whole study is less; at most ``MAX_CHUNK_ITEMS`` items).
 
     >>> chunk_bounds(100, 1e6)           # 1e6 robot-steps per item: 50 items make 1 s
@@ -52,6 +52,7 @@ def chunk_bounds(count: int, work_per_item: float, seconds: float = CHUNK_SECOND
     """
     if count <= 0:
         return []
+    seconds = CHUNK_SECONDS if seconds is None else seconds
     per_item = max(work_per_item, 1.0) / NOMINAL_ROBOT_STEPS_PER_S
     size = min(max(1, math.ceil(max(seconds, MIN_CHUNK_SECONDS) / per_item)), MAX_CHUNK_ITEMS)
     chunks = math.ceil(count / size)

@@ -265,18 +265,21 @@ def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
 
 
 def distribution_summary(values: np.ndarray) -> dict:
-    """Mean (with a normal 95 % interval), std, min, max and quantiles of the finite values."""
+    """Mean (with a normal 95 % interval), std, min, max and quantiles of the finite values
+    (a figure that overflows, e.g. the std of nearly diverged samples, is null)."""
     finite = values[np.isfinite(values)]
     n = int(finite.size)
     if n == 0:
         return {"n": 0}
-    mean = float(finite.mean())
-    std = float(finite.std(ddof=1)) if n > 1 else 0.0
-    half = Z95 * std / math.sqrt(n)
-    quantiles = np.quantile(finite, QUANTILES)
-    return {"n": n, "mean": mean, "mean_ci95": [mean - half, mean + half], "std": std, "min": float(finite.min()),
-            "max": float(finite.max()), "quantiles": {f"q{round(100 * q):02d}": float(v)
-                                                    for q, v in zip(QUANTILES, quantiles)}}
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = float(finite.mean())
+        std = float(finite.std(ddof=1)) if n > 1 else 0.0
+        half = Z95 * std / math.sqrt(n)
+        quantiles = np.quantile(finite, QUANTILES)
+    f = _finite_or_none
+    return {"n": n, "mean": f(mean), "mean_ci95": [f(mean - half), f(mean + half)], "std": f(std),
+            "min": float(finite.min()), "max": float(finite.max()),
+            "quantiles": {f"q{round(100 * q):02d}": f(v) for q, v in zip(QUANTILES, quantiles)}}
 
 
 @dataclass
@@ -367,8 +370,11 @@ class MonteCarloResult:
             if values.size:
                 ax.hist(values, bins=bins, color="#3a6ea5", edgecolor="white", linewidth=0.3)
                 summary = distribution_summary(values)
-                ax.axvline(summary["mean"], color="#c0392b", linewidth=1.0, label="mean")
-                ax.axvline(summary["quantiles"]["q95"], color="#555555", linewidth=1.0, linestyle="--", label="q95")
+                if summary["mean"] is not None:
+                    ax.axvline(summary["mean"], color="#c0392b", linewidth=1.0, label="mean")
+                if summary["quantiles"]["q95"] is not None:
+                    ax.axvline(summary["quantiles"]["q95"], color="#555555", linewidth=1.0, linestyle="--",
+                               label="q95")
             ax.set_title(name, fontsize=9)
             ax.tick_params(labelsize=7)
             ax.set_ylabel("samples", fontsize=8)
