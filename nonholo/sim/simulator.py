@@ -210,10 +210,14 @@ def _check_batch(scenarios: list[Scenario]) -> None:
             described[id(s.reference)] = repr(s.reference.describe())
         return described[id(s.reference)]
 
-    key = lambda s: (s.names, tuple(type(r).__name__ for r in s.robots),  # noqa: E731
-                     tuple(r.parents for r in s.robots),
-                     tuple(_structure(r, s, {n: i for i, n in enumerate(s.names)}) for r in s.robots),
-                     reference(s), s.duration, s.dt, s.method, s.control_period, s.substeps)
+    def key(s):
+        index = {n: i for i, n in enumerate(s.names)}
+        return (s.names, tuple(type(r).__name__ for r in s.robots), tuple(r.parents for r in s.robots),
+                tuple(_structure(r, s, index) for r in s.robots), reference(s), s.duration, s.dt, s.method,
+                s.control_period, s.substeps)
+
+    if len(scenarios) == 1:
+        return
     first_key = key(first)
     for other in scenarios[1:]:
         if key(other) != first_key:
