@@ -166,3 +166,13 @@ def test_cli_json_and_exit_codes(tmp_path, capsys):
     text = capsys.readouterr().out
     assert max(len(line) for line in text.splitlines()) <= 100
     np.testing.assert_equal(len(text.splitlines()) > 5, True)
+
+
+def test_docstring_examples_of_the_study_modules():
+    import doctest
+
+    from nonholo.studies import distributed, montecarlo, tune
+
+    for module in (montecarlo, tune, distributed):
+        failures, attempted = doctest.testmod(module)
+        assert failures == 0 and attempted > 0, module.__name__
