@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli.montecarlo import add_dask_option
 
 
 def register(subparsers) -> None:
@@ -27,6 +28,7 @@ def register(subparsers) -> None:
     parser.add_argument("--out", metavar="DIR", help="write sweep.csv, sweep.json and sweep.png to DIR")
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_dask_option(parser)
     parser.set_defaults(handler=handle)
 
 
@@ -40,7 +42,9 @@ def handle(args: argparse.Namespace) -> int:
         axes = [GainAxis.parse(text) for text in args.gain]
         if args.steps is not None and args.steps < 1:
             raise NonholoInputError(f"--steps must be a positive integer, got {args.steps}")
-        scenario = load_scenario(examples.resolve(args.scenario))
+        path = examples.resolve(args.scenario)
+        scenario = load_scenario(path)
+        text = path.read_text(encoding="utf-8") if args.dask else None
         if not args.quiet and not sys.stderr.isatty():  # a terminal gets the simulator's progress bar instead
             points = 1
             for axis in axes:
@@ -48,7 +52,8 @@ def handle(args: argparse.Namespace) -> int:
             print(f"nonholo sweep: simulating {points} grid points of {args.scenario} as one batch …", file=sys.stderr,
                   flush=True)
         result = run_sweep(scenario, axes, robot=args.robot, metric=args.metric,
-                           steps=args.steps, progress=False if args.quiet else None)
+                           steps=args.steps, progress=False if args.quiet else None, dask=args.dask, text=text,
+                           source=str(path))
     except NonholoInputError as exc:
         print(f"nonholo sweep: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

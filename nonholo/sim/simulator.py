@@ -204,13 +204,26 @@ def _structure(robot, scenario: Scenario, index: dict) -> tuple:
 
 def _check_batch(scenarios: list[Scenario]) -> None:
     first = scenarios[0]
-    key = lambda s: (s.names, tuple(type(r).__name__ for r in s.robots),  # noqa: E731
-                     tuple(r.parents for r in s.robots),
-                     tuple(_structure(r, s, {n: i for i, n in enumerate(s.names)}) for r in s.robots),
-                     repr(s.reference.describe()) if s.reference is not None else None, s.duration, s.dt, s.method,
-                     s.control_period, s.substeps)
+    described: dict[int, str] = {}   # members usually share one reference object: describe it once
+
+    def reference(s):
+        if s.reference is None:
+            return None
+        if id(s.reference) not in described:
+            described[id(s.reference)] = repr(s.reference.describe())
+        return described[id(s.reference)]
+
+    def key(s):
+        index = {n: i for i, n in enumerate(s.names)}
+        return (s.names, tuple(type(r).__name__ for r in s.robots), tuple(r.parents for r in s.robots),
+                tuple(_structure(r, s, index) for r in s.robots), reference(s), s.duration, s.dt, s.method,
+                s.control_period, s.substeps)
+
+    if len(scenarios) == 1:
+        return
+    first_key = key(first)
     for other in scenarios[1:]:
-        if key(other) != key(first):
+        if key(other) != first_key:
             raise NonholoInputError(f"scenario {other.name!r} differs in structure from {first.name!r}: a batch "
                                     "shares robots, links, laws, changes, reference and time grid")
 
@@ -268,8 +281,9 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
             raise NonholoInputError(f"robots {', '.join(r.name for r in robots if isinstance(r, Robot))} form one "
                                     "connected formation with more than two different root controllers (at most two)")
         rate = _prior_rate(robots, v_peak, omega_peak, known)
-        if rate not in plans:
-            plans[rate] = prior_plan(first, rate)
+        if rate not in plans:   # one plan object per distinct plan: members of equal plans share a group
+            plan = prior_plan(first, rate)
+            plans[rate] = next((p for p in plans.values() if np.array_equal(p, plan)), plan)
         prior = plans[rate]
         if len(robots) == 1:
             shape = (_structure(robots[0], first, {}),)
@@ -284,13 +298,21 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     return groups
 
 
+ON_DIVERGENCE = ("raise", "report")
+
+
 def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
-             progress: bool | None = None) -> SimulationResult:
+             progress: bool | None = None, on_divergence: str = "raise") -> SimulationResult:
     """Simulate every robot of ``scenario`` — or of a list of scenarios of one structure (a
     batch that differs in gains, offsets, targets, goals and starts). ``record`` keeps
     trajectories (else only the statistics, for large batches). ``progress``: show a
-    progress bar (default: on a terminal, for long runs)."""
+    progress bar (default: on a terminal, for long runs). ``on_divergence``: "raise" a
+    ``SimulationError`` when a robot's state becomes non-finite, or "report" it — the run
+    completes and ``diverged(result.stats)`` marks the robots of each member that did (their
+    statistics are not finite), e.g. to count failures over a Monte-Carlo batch."""
     started = time.perf_counter()
+    if on_divergence not in ON_DIVERGENCE:
+        raise NonholoInputError(f"on_divergence must be one of {', '.join(ON_DIVERGENCE)}, got {on_divergence!r}")
     scenarios = list(scenario) if isinstance(scenario, (list, tuple)) else [scenario]
     if not scenarios or not all(isinstance(s, Scenario) for s in scenarios):
         raise NonholoInputError("simulate() takes a nonholo.Scenario or a list of them")
@@ -320,7 +342,8 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
             if record:
                 records[:, :, indices, member] = g_record[:, :, :, b]
             substeps[indices] = plan.max()
-        _check_diverged(group, g_stats)
+        if on_divergence == "raise":
+            _check_diverged(group, g_stats)
     rows = None
     if first.reference is not None:   # every plan's stage rows include the output grid
         stage_rows, row_start, _ = next(iter(reference_cache.values()), (None, None, None))
@@ -400,8 +423,14 @@ def _integrate_chunks(integrate, args, n_steps, work, name, count, progress, out
             bar.update(int(k_stop - k_start))
 
 
+def diverged(stats: np.ndarray) -> np.ndarray:
+    """(robots, members) booleans: the robots whose state became non-finite, from the
+    statistics (STAT_COUNT, robots, members) of a run."""
+    return ~np.isfinite(stats[[kn.E_MEAN, kn.E_M2, kn.V_SQ, kn.W_SQ]]).all(axis=0)
+
+
 def _check_diverged(group: Group, stats: np.ndarray) -> None:
-    finite = np.isfinite(stats[[kn.E_MEAN, kn.E_M2, kn.V_SQ, kn.W_SQ]]).all(axis=(0, 2))
+    finite = ~diverged(stats).any(axis=1)
     if not finite.all():
         names = [robot.name for robot, ok in zip(group.robots, finite) if not ok]
         shown = ", ".join(repr(name) for name in names[:5]) + (" …" if len(names) > 5 else "")

@@ -25,6 +25,7 @@ import numpy as np
 
 from nonholo import Follower, Robot, Scenario, simulate
 from nonholo.errors import NonholoInputError
+from nonholo.studies import distributed
 
 METRICS = ("mean", "rms", "max", "final")
 
@@ -192,11 +193,12 @@ class SweepResult:
     def to_dict(self) -> dict:
         out = {"scenario": self.scenario, "robot": self.robot, "controller": self.controller, "metric": self.metric,
                "axes": {a.name: a.values.tolist() for a in self.axes}, "points": self.points,
-               "elapsed_s": self.elapsed_s, "errors": {s: self.errors[s].tolist() for s in _STATISTICS}}
+               "errors": {s: self.errors[s].tolist() for s in _STATISTICS}}
         out["best"] = {"point": self.best(), "value": float(self.values.min()), "on_edge": self.best_on_edge()}
         if len(self.axes) == 1:
             trend = self.trend()
             out["trend"] = {"word": trend.word, "runs": list(trend.runs)}
+        out["timing"] = {"elapsed_s": self.elapsed_s}   # the only part that varies between runs
         return out
 
     def write_json(self, path: Path) -> Path:
@@ -256,18 +258,22 @@ def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> lis
     if isinstance(base, Follower):
         return [_with_values(base, {n: float(v) for n, v in zip(names, point)})
                 for point in zip(*(g.ravel() for g in grids))]
-    config = base.controller
+    return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
+                                controller=with_gains(base.controller, {n: float(v) for n, v in zip(names, point)}))
+            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+
+
+def with_gains(config, values: dict):
+    """``config`` (a ``ControllerConfig``) with the gains ``values`` changed and the others
+    kept (``xi0`` included; an alias such as ``kp`` replaces the gains it sets)."""
     fixed = dict(config.gains)
     if config.xi0 is not None:
         fixed[config.controller.initial_gain] = config.xi0
     for alias, targets in config.controller.aliases.items():
-        if alias in names:
+        if alias in values:
             for target in targets:
                 fixed.pop(target, None)
-    return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
-                                controller=config.controller.configure(
-                                    {**fixed, **{n: float(v) for n, v in zip(names, point)}}, config.variant))
-            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+    return config.controller.configure({**fixed, **values}, config.variant)
 
 
 @dataclass(frozen=True)
@@ -279,62 +285,108 @@ class SweepSpec:
 
 
 def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "mean", steps: int | None = None,
-               progress: bool | None = None) -> list[SweepResult]:
+               progress: bool | None = None, dask: str | None = None, text: str | None = None,
+               source: str = "<scenario>") -> list[SweepResult]:
     """Several sweeps of one scenario simulated together as ONE batch (one ``simulate``
-    call, statistics only); ``steps`` overrides the scenario's number of output steps."""
+    call, statistics only); ``steps`` overrides the scenario's number of output steps.
+
+    ``dask`` ("local" or a scheduler address; needs the scenario's TOML ``text``) spreads
+    chunks of the batch over a Dask cluster (``nonholo.studies.distributed``). Lone robots'
+    results do not depend on their batch, so the chunks give the one batch's numbers; sweeps
+    of formations are cut into the same chunks here and there."""
     if metric not in METRICS:
         raise NonholoInputError(f"unknown metric {metric!r} (valid: {', '.join(METRICS)})")
-    if scenario.followers or any(r.posture for r in scenario.roots):
-        return [_run_graph_sweep(scenario, spec, metric, steps, progress) for spec in specs]
-    bases, robots, spans = [], [], []
-    for number, spec in enumerate(specs):
-        if not 1 <= len(spec.axes) <= 2:
-            raise NonholoInputError(f"sweep one or two gains, got {len(spec.axes)}")
-        base = choose_robot(scenario, [a.name for a in spec.axes], spec.robot)
-        batch = sweep_robots(base, spec.axes, prefix=f"{number}:" if len(specs) > 1 else "")
-        spans.append(slice(len(robots), len(robots) + len(batch)))
-        bases.append(base)
-        robots += batch
+    if dask is not None and text is None:
+        raise NonholoInputError("a sweep on Dask needs the scenario's TOML text (workers parse it)")
     if steps is not None:
         scenario = dataclasses.replace(scenario, dt=None, steps=steps)
+    payload = {"scenario": scenario, "text": text, "source": source, "steps": steps, "progress": progress,
+               "specs": [(spec.robot, [(a.name, a.values) for a in spec.axes]) for spec in specs]}
     started = time.perf_counter()
-    result = simulate(dataclasses.replace(scenario, robots=tuple(robots), steps=None, name=f"{scenario.name}-sweep"),
-                      record=False, progress=progress)
+    graph = bool(scenario.followers or any(r.posture for r in scenario.roots))
+    outputs = []
+    with distributed.dask_client(dask) as client:
+        for which in (range(len(specs)) if graph else [None]):
+            count, work = _sweep_size(scenario, specs, which)
+            bounds = distributed.chunk_bounds(count, work) if graph or client is not None else [(0, count)]
+            chunks = [{**payload, "which": which, "range": r} for r in bounds]
+            if client is not None:
+                chunks = [{**{k: v for k, v in c.items() if k != "scenario"}, "progress": False} for c in chunks]
+            errors = [None] * len(bounds)
+            for index, part in distributed.run_chunks(sweep_chunk, chunks, client):
+                errors[index] = part
+            outputs.append({s: np.concatenate([e[s] for e in errors]) for s in _STATISTICS})
     elapsed = time.perf_counter() - started
     sweeps = []
-    for spec, base, span in zip(specs, bases, spans):
+    spans, bases = _spans(scenario, specs)
+    for number, (spec, base) in enumerate(zip(specs, bases)):
         shape = tuple(a.values.size for a in spec.axes)
-        errors = {s: getattr(result.metrics, f"error_{s}")[span].reshape(shape).copy() for s in _STATISTICS}
-        sweeps.append(SweepResult(scenario.name, base.name, base.controller.name, tuple(spec.axes), metric, errors,
-                                  elapsed))
+        errors = outputs[number] if graph else {s: outputs[0][s][spans[number]] for s in _STATISTICS}
+        law = base.law if isinstance(base, Follower) else base.controller.name
+        sweeps.append(SweepResult(scenario.name, base.name, law, tuple(spec.axes), metric,
+                                  {s: errors[s].reshape(shape).copy() for s in _STATISTICS}, elapsed))
     return sweeps
 
 
-def _run_graph_sweep(scenario: Scenario, spec: SweepSpec, metric: str, steps: int | None,
-                     progress: bool | None) -> SweepResult:
-    """A sweep of a scenario with followers or posture roots: one copy of the whole scenario
-    per grid point, simulated as one batch; the metric is the varied robot's error (a
-    follower's first output, l or l1)."""
-    if not 1 <= len(spec.axes) <= 2:
-        raise NonholoInputError(f"sweep one or two gains, got {len(spec.axes)}")
-    base = choose_robot(scenario, [a.name for a in spec.axes], spec.robot)
-    if steps is not None:
-        scenario = dataclasses.replace(scenario, dt=None, steps=steps)
+def _specs(pairs) -> list[SweepSpec]:
+    return [SweepSpec(tuple(GainAxis(name, np.asarray(values)) for name, values in axes), robot)
+            for robot, axes in pairs]
+
+
+def _spans(scenario: Scenario, specs: Sequence[SweepSpec]):
+    """Each spec's slice of the robots of a tracking batch, and its base robot."""
+    spans, bases, start = [], [], 0
+    for spec in specs:
+        if not 1 <= len(spec.axes) <= 2:
+            raise NonholoInputError(f"sweep one or two gains, got {len(spec.axes)}")
+        bases.append(choose_robot(scenario, [a.name for a in spec.axes], spec.robot))
+        points = int(np.prod([a.values.size for a in spec.axes]))
+        spans.append(slice(start, start + points))
+        start += points
+    return spans, bases
+
+
+def _sweep_size(scenario: Scenario, specs: Sequence[SweepSpec], which: int | None) -> tuple[int, float]:
+    """Items of one batch (robots of the tracking batch, or members of sweep ``which``) and
+    the work of one item in robot-steps."""
+    spans, _ = _spans(scenario, specs)
+    steps = scenario.n_steps * (scenario.substeps or 1)
+    if which is None:
+        return spans[-1].stop, steps
+    return spans[which].stop - spans[which].start, steps * len(scenario.robots)
+
+
+def sweep_chunk(payload: dict) -> dict:
+    """The error statistics of items ``range`` of one batch of a sweep (a worker's unit):
+    the robots of the tracking batch (``which`` None) or the members of graph sweep
+    ``which``. ``payload`` has the ``scenario`` (in this process) or its TOML ``text``."""
+    scenario = payload.get("scenario")
+    if scenario is None:
+        scenario = distributed.scenario_of(payload["text"], payload["source"])
+        if payload["steps"] is not None:
+            scenario = dataclasses.replace(scenario, dt=None, steps=payload["steps"])
+    specs = _specs(payload["specs"])
+    a, b = payload["range"]
+    if payload["which"] is None:
+        robots = []
+        for number, spec in enumerate(specs):
+            base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
+            robots += sweep_robots(base, spec.axes, prefix=f"{number}:" if len(specs) > 1 else "")
+        batch = dataclasses.replace(scenario, robots=tuple(robots[a:b]), steps=None, name=f"{scenario.name}-sweep")
+        metrics = simulate(batch, record=False, progress=payload["progress"]).metrics
+        return {s: np.atleast_1d(getattr(metrics, f"error_{s}")) for s in _STATISTICS}
+    spec = specs[payload["which"]]
+    base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
     index = scenario.names.index(base.name)
     members = [dataclasses.replace(scenario, robots=scenario.robots[:index] + (robot,) + scenario.robots[index + 1:],
                                    steps=None, name=f"{scenario.name}-sweep")
-               for robot in sweep_robots(base, spec.axes)]
-    started = time.perf_counter()
-    result = simulate(members, record=False, progress=progress)
-    elapsed = time.perf_counter() - started
-    shape = tuple(a.values.size for a in spec.axes)
-    errors = {s: getattr(result.metrics, f"error_{s}")[index].reshape(shape).copy() for s in _STATISTICS}
-    law = base.law if isinstance(base, Follower) else base.controller.name
-    return SweepResult(scenario.name, base.name, law, tuple(spec.axes), metric, errors, elapsed)
+               for robot in sweep_robots(base, spec.axes)[a:b]]
+    metrics = simulate(members, record=False, progress=payload["progress"]).metrics
+    return {s: np.atleast_1d(getattr(metrics, f"error_{s}")[index]) for s in _STATISTICS}
 
 
 def run_sweep(scenario: Scenario, axes: Sequence[GainAxis], robot: str | None = None, metric: str = "mean",
-              steps: int | None = None, progress: bool | None = None) -> SweepResult:
+              steps: int | None = None, progress: bool | None = None, **options) -> SweepResult:
     """Simulate the grid of ``axes`` (one or two gains) for one robot of ``scenario`` as
-    one batch (see ``run_sweeps``)."""
-    return run_sweeps(scenario, [SweepSpec(tuple(axes), robot)], metric, steps, progress)[0]
+    one batch (see ``run_sweeps``; ``options``: ``dask``, ``text``, ``source``)."""
+    return run_sweeps(scenario, [SweepSpec(tuple(axes), robot)], metric, steps, progress, **options)[0]

@@ -1,0 +1,71 @@
+"""Gain tuning: the closed-form case (dynamic feedback on a straight line, ∫|e|² dt =
+|ė(0)|²/(2 kp kd)), objectives parsed safely, robust tuning over starts, the CLI."""
+import json
+
+import numpy as np
+import pytest
+
+from nonholo.cli import main
+from nonholo.errors import NonholoInputError
+from nonholo.studies.tune import Objective, evaluate_chunk, run_tune
+
+# Start on the line (e(0) = 0) heading along x while the line heads along y at 1 m/s, with
+# ξ(0) = 0.5: ė(0) = (0, 1) − 0.5 (1, 0), |ė(0)|² = 1.25; the error dynamics are linear.
+LINE = """name = "line-dfl"
+[simulation]
+duration = 40.0
+dt = 0.01
+[reference]
+kind = "line"
+[[robots]]
+name = "leader"
+controller = "dynamic-feedback"
+gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }
+"""
+E_DOT_0 = 1.25
+
+
+def ise(kp, kd):
+    return E_DOT_0 / (2 * kp * kd)
+
+
+def test_objective_matches_the_closed_form():
+    points = np.array([[0.5, 0.5], [1.0, 0.7], [3.0, 2.0], [2.0, 4.0]])
+    values = evaluate_chunk({"text": LINE, "source": "line", "steps": None, "robot": "leader",
+                             "fields": [("leader", "gains.kp"), ("leader", "gains.kd")], "values": points,
+                             "objective": "ise"})
+    np.testing.assert_allclose(values, [ise(kp, kd) for kp, kd in points], rtol=2e-3)
+
+
+def test_finds_the_known_optimum():
+    result = run_tune(LINE, ["kp", "kd"], ["kp=0.5:4", "kd=0.5:4"], "ise", seed=2, maxiter=15, popsize=8,
+                      progress=False)
+    assert result.gains["kp"] == pytest.approx(4.0, rel=0.01) and result.gains["kd"] == pytest.approx(4.0, rel=0.01)
+    assert result.objective == pytest.approx(ise(4.0, 4.0), rel=0.01)
+    assert result.baseline == {"kp": 1.0, "kd": 0.7}              # Table 5.1
+    assert result.baseline_objective == pytest.approx(ise(1.0, 0.7), rel=2e-3)
+    assert result.history == sorted(result.history, reverse=True)  # the best never gets worse
+    assert result.evaluations >= 16
+
+
+def test_objectives_are_parsed_never_evaluated():
+    assert Objective.parse("2*rms+max").describe() == "2*rms + max"
+    for bad in ("rms*2", "__import__('os')", "rms + -1*effort", "speed"):
+        with pytest.raises(NonholoInputError):
+            Objective.parse(bad)
+
+
+def test_robust_over_starts_and_cli(tmp_path, capsys):
+    path = tmp_path / "line.toml"
+    path.write_text(LINE)
+    code = main(["tune", str(path), "--gains", "kp,kd", "--bounds", "kp=0.5:2", "--bounds", "kd=0.5:2",
+                 "--objective", "rms + 0.001*effort", "--start", "leader.start.x=normal(0, 0.5)", "--start-samples",
+                 "4", "--maxiter", "3", "--popsize", "4", "--steps", "1000", "--json", "--quiet", "--out",
+                 str(tmp_path / "out")])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["starts"] == 4 and set(out["optimum"]["gains"]) == {"kp", "kd"}
+    assert out["optimum"]["objective"] <= out["baseline"]["objective"] * 1.5
+    assert (tmp_path / "out" / "convergence.png").stat().st_size > 0
+    assert main(["tune", str(path), "--gains", "kp,zz"]) == 2
+    assert "zz" in capsys.readouterr().err
+    assert main(["tune", str(path), "--gains", "kp", "--bounds", "kp=3:1"]) == 2
