@@ -75,3 +75,19 @@ def test_lockstep_equals_centralized_sampled_data(make):
     assert summary["network"]["mode"] == "lockstep"
     for link in summary["network"]["links"].values():
         assert link["rejected"] == 0 and link["lost"] == 0 and link["sent"] == link["received"]
+
+
+def test_fleet_cli_json(tmp_path, capsys):
+    import json
+
+    from nonholo.cli import main
+
+    path = tmp_path / "one.toml"
+    path.write_text('name = "one"\n[simulation]\nduration = 1.0\ndt = 0.01\ncontrol_period = 0.02\n'
+                    '[reference]\nkind = "circle"\n[[robots]]\nname = "leader"\ncontroller = "dynamic-feedback"\n'
+                    'gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }\n')
+    assert main(["fleet", str(path), "--transport", "inproc", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["network"]["transport"] == "inproc" and "leader" in summary["robots"]
+    path.write_text(path.read_text().replace("control_period = 0.02\n", ""))
+    assert main(["fleet", str(path), "--json"]) == 2
