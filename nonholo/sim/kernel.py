@@ -283,8 +283,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
       parents, branch, sin_floor, instant)``: every robot's command and outputs at one
       instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``);
     * ``score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch,
-      sin_floor, d_max, stats, pair_stats, record)``: statistics and record of a trajectory
-      computed elsewhere (the scipy cross-check, states (N+1, 4, R, B)), by the same code.
+      sin_floor, d_max, stats, pair_stats, record, hold_every, helds)``: statistics and record
+      of a trajectory computed elsewhere (the scipy cross-check, or the robots of a fleet run:
+      states (N+1, 4, R, B), and with ``hold_every`` > 0 the commands each robot held,
+      helds (N+1, HELD_COUNT, R, B)), by the same code.
 
     Only these closures capture the laws: numba caches closures over module-level
     functions across processes, not closures over other closures.
@@ -532,7 +534,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     state[0, r, b] = x + sixth * (first_x + 2.0 * mid_x + dx)
                     state[1, r, b] = y + sixth * (first_y + 2.0 * mid_y + dy)
                     state[2, r, b] = theta + sixth * (first_theta + 2.0 * mid_theta + dtheta)
-        if followers:
+        if followers and not sampled_data:
             update_branches(state, fields, kinds, parents, branch)
         return peak
 
@@ -564,6 +566,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
             ref = row_values(rows, row)
+            if followers and sampled_data and k % hold_every == 0:
+                # Sampled data: bearings move to their branch at control instants only, as
+                # a robot that sees its parent's pose only then does (spec fleet.md §6).
+                update_branches(state, fields, kinds, parents, branch)
             evaluate_at(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
                         instant)
             if sampled_data:   # a control instant holds the new commands; between them they stay in force
@@ -591,17 +597,23 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
 
     @njit(**_OPTIONS)
     def score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max, stats,
-              pair_stats, record):
+              pair_stats, record, hold_every, helds):
         n_robots, n_batch = states.shape[2], states.shape[3]
         instant = np.zeros((INSTANT_COUNT, n_robots, n_batch))
+        sampled_data = hold_every != 0
         recording = record.shape[1] != 0
         for k in range(states.shape[0]):
             state = states[k]
-            if followers:
+            if followers and (not sampled_data or k % hold_every == 0):
                 update_branches(state, fields, kinds, parents, branch)
             ref = row_values(rows, k)
             evaluate_at(state, fields, limits, ref, targets, k, offsets, kinds, order, parents, branch, sin_floor,
                         instant)
+            if sampled_data:   # the commands each robot held stand for the instant's commands
+                for field in range(HELD_COUNT):
+                    for r in range(n_robots):
+                        for b in range(n_batch):
+                            instant[field, r, b] = helds[k, field, r, b]
             accumulate(state, instant, ref[0], k, kinds, fields, d_max, stats, pair_stats, record, recording)
 
     # Inner compiled functions are closures too: give each an identity that names this

@@ -353,6 +353,72 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
                             elapsed_s=time.perf_counter() - started)
 
 
+class PlannedGroup:
+    """A group of a sampled-data run with what ``simulate`` integrates it on: ``plan`` the RK4
+    sub-steps of every output step, ``rows`` (N+1, 10) the reference and ``targets``
+    (N+1, 4, R) the follower targets at the output instants, taken from the same stage
+    tables (so a robot program that reads them computes bit for bit what the kernel does)."""
+
+    def __init__(self, group: Group, plan: np.ndarray, rows: np.ndarray, targets: np.ndarray):
+        self.group, self.plan, self.rows, self.targets = group, plan, rows, targets
+
+
+def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
+    """The groups of a sampled-data scenario with their sub-step plans (planned as
+    ``simulate`` plans them, by running it without recording): what each robot of a
+    distributed lockstep run needs to reproduce the centralized run (spec fleet.md §6)."""
+    if scenario.hold_every == 0 or scenario.method != "rk4":
+        raise NonholoInputError("a distributed run needs sampled-data control: set control_period "
+                                "(a multiple of dt) and method = \"rk4\"")
+    grid = np.arange(scenario.n_steps + 1) * scenario.dt
+    v_peak, omega_peak = _reference_survey(scenario)
+    v_d0 = float(scenario.reference.table(grid[:1])[0, REF_V]) if scenario.reference is not None else 0.0
+    cache_: dict[bytes, tuple] = {}
+    planned = []
+    for group in _groups([scenario], v_peak, omega_peak, v_d0):
+        integrate, _, _ = kernel_for(group.laws, group.followers)
+        *_, plan = _run_rk4(integrate, scenario, group, False, False, cache_)
+        stage_rows, row_start, times = cache_[plan.tobytes()]
+        targets = group.targets(times)[row_start] if group.followers else np.zeros((row_start.size, 4, 1))
+        planned.append(PlannedGroup(group, plan, stage_rows[row_start], targets))
+    return planned
+
+
+def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.ndarray, helds: np.ndarray,
+                 elapsed_s: float) -> SimulationResult:
+    """The result of a sampled-data run whose trajectories were computed elsewhere (by the
+    robots of a fleet): ``states`` (N+1, 4, robots) and the commands each robot held,
+    ``helds`` (N+1, HELD_COUNT, robots), robots in scenario order; scored by the kernel's
+    own statistics code, as ``simulate`` scores its runs."""
+    n_steps, n_robots = scenario.n_steps, len(scenario.robots)
+    stats = np.empty((kn.STAT_COUNT, n_robots, 1))
+    pair_stats = np.full((kn.PAIR_COUNT, len(scenario.components()), 1), np.nan)
+    records = np.empty((kn.REC_COUNT, n_steps + 1, n_robots, 1))
+    substeps = np.empty(n_robots, dtype=np.int64)
+    component_of = {c[0]: k for k, c in enumerate(scenario.components())}
+    for item in planned:
+        group = item.group
+        _, _, score = kernel_for(group.laws, group.followers)
+        columns = [list(indices) for _, indices in group.copies]
+        g_states = np.ascontiguousarray(np.stack([states[:, :, c] for c in columns], axis=-1))
+        g_helds = np.ascontiguousarray(np.stack([helds[:, :, c] for c in columns], axis=-1))
+        g_stats, g_pairs = kn.new_stats(*group.state.shape[1:])
+        g_record = np.empty((kn.REC_COUNT, n_steps + 1, *group.state.shape[1:]))
+        score(g_states, group.fields, group.limits, item.rows, item.targets, group.offsets, group.kinds, group.order,
+              group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, g_stats, g_pairs, g_record,
+              scenario.hold_every, g_helds)
+        for b, indices in enumerate(columns):
+            stats[:, indices, 0] = g_stats[:, :, b]
+            pair_stats[:, component_of[indices[0]], 0] = g_pairs[:, b]
+            records[:, :, indices, 0] = g_record[:, :, :, b]
+            substeps[indices] = item.plan.max()
+        _check_diverged(group, g_stats)
+    grid = np.arange(n_steps + 1) * scenario.dt
+    rows = planned[0].rows if scenario.reference is not None else None
+    return SimulationResult(scenarios=(scenario,), t=grid, reference_rows=rows, stats=stats, pair_stats=pair_stats,
+                            record=records, substeps=substeps, elapsed_s=elapsed_s)
+
+
 def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
     """Refuse, before allocating, a run whose arrays would not fit (an estimate)."""
     samples = scenario.n_steps + 1
@@ -482,5 +548,5 @@ def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bo
     records = np.empty((kn.REC_COUNT, grid.size if record else 0, n_robots, n_batch))
     score(states, group.fields, group.limits, _reference_rows(scenario, grid), group.targets(grid), group.offsets,
           group.kinds, group.order, group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, stats,
-          pair_stats, records)
+          pair_stats, records, 0, np.zeros((0, kn.HELD_COUNT, n_robots, n_batch)))
     return stats, pair_stats, records, np.ones(scenario.n_steps, dtype=np.int64)

@@ -1,0 +1,43 @@
+"""The plant behind a robot program: read its pose, command v and ω.
+
+A real robot's driver takes the simulated unicycle's place by implementing ``Plant``:
+``pose()`` returns the latest (x, y, θ) estimate in metres and radians (odometry, motion
+capture) and ``command(v, ω)`` sends a saturated command that the drive holds until the
+next one. A simulated plant also has ``advance(k)``, with which a lockstep run moves it
+over output step k on logical time; a real plant moves by itself.
+"""
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from nonholo.fleet.step import plant_steps
+
+
+class Plant(Protocol):
+    def pose(self) -> tuple[float, float, float]:
+        """The robot's axle pose (x, y, θ) now."""
+
+    def command(self, v: float, omega: float) -> None:
+        """Hold linear speed ``v`` (m/s) and turn rate ``omega`` (rad/s) until the next command."""
+
+
+class SimulatedUnicycle:
+    """The kinematic unicycle integrated as the centralized simulator integrates it: over
+    output step k, ``plan[k]`` RK4 sub-steps of dt/plan[k] under the held command."""
+
+    def __init__(self, pose, dt: float, plan: np.ndarray, contract: bool) -> None:
+        self._pose = np.array(pose[:3], dtype=float)
+        self.dt, self.plan = dt, plan
+        self.v = self.omega = 0.0
+        self._hold, _ = plant_steps(contract)
+
+    def pose(self) -> tuple[float, float, float]:
+        return float(self._pose[0]), float(self._pose[1]), float(self._pose[2])
+
+    def command(self, v: float, omega: float) -> None:
+        self.v, self.omega = float(v), float(omega)
+
+    def advance(self, k: int) -> None:
+        self._hold(self._pose, self.v, self.omega, self.dt, int(self.plan[k]))
