@@ -379,7 +379,8 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
         integrate, _, _ = kernel_for(group.laws, group.followers)
         *_, plan = _run_rk4(integrate, scenario, group, False, False, cache_)
         stage_rows, row_start, times = cache_[plan.tobytes()]
-        targets = group.targets(times)[row_start] if group.followers else np.zeros((row_start.size, 4, 1))
+        table = group.targets(times)   # one row when no target changes
+        targets = table[row_start] if table.shape[0] > 1 else np.repeat(table, row_start.size, axis=0)
         planned.append(PlannedGroup(group, plan, stage_rows[row_start], targets))
     return planned
 

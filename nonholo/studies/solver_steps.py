@@ -133,7 +133,7 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
         robot_stats, pair_stats = kn.new_stats(1, 1)
         score(np.ascontiguousarray(y.reshape(-1, 4, 1, 1)), one.fields, one.limits,
               np.ascontiguousarray(scenario.reference.table(t)), *one.graph(), robot_stats, pair_stats,
-              np.empty((kn.REC_COUNT, 0, 1, 1)))
+              np.empty((kn.REC_COUNT, 0, 1, 1)), 0, np.zeros((0, kn.HELD_COUNT, 1, 1)))
         stats[:, i] = robot_stats[:, 0, 0]
         times.append(t)
     samples = np.array([t.size for t in times], dtype=float)
