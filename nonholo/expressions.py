@@ -367,11 +367,21 @@ class _Builder:
         return self.checked(function(*(self.build(argument) for argument in node.args)), node)
 
     def checked(self, value: sp.Expr, node: ast.AST) -> sp.Expr:
-        """``value``, unless sympy made it infinite or undefined (1/0, log(0), tan(pi/2))."""
+        """``value``, unless sympy made it infinite or undefined (1/0, log(0), tan(pi/2)),
+        or it is a constant beyond the floating-point range or not real. Constants are
+        checked as they are built, so sympy never evaluates a function of a huge number
+        (``tan(cosh(1e20))`` would need pi to 10^20 digits)."""
         if value in _NON_FINITE:
             self.fail(node, "not finite (a division by zero or an undefined value)")
-        if value.is_Number and _too_large(value):
-            self.fail(node, f"beyond the floating-point range (about 1e{_log10(value):.0f})")
+        if value.is_Number:
+            if _too_large(value):
+                self.fail(node, f"beyond the floating-point range (about 1e{_log10(value):.0f})")
+        elif value.is_number:  # a constant such as cosh(20): its arguments are checked already
+            number = complex(value.evalf(20))
+            if not (math.isfinite(number.real) and math.isfinite(number.imag)):
+                self.fail(node, "beyond the floating-point range")
+            if abs(number.imag) > 1e-12 * max(1.0, abs(number.real)):
+                self.fail(node, "not a real number")
         return value
 
 

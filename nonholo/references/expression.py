@@ -71,8 +71,11 @@ class ExpressionReference(Reference):
             raise ExpressionError(f"the formulas and their derivatives have more than {MAX_COMPILED_NODES:,} "
                                   "nodes together: write a smaller formula")
         # sin and cos dominate the cost of evaluating a reference table: use the SIMD ones.
-        self._evaluate = sp.lambdify(T, list(self._exprs), modules=[{"sin": array_sin, "cos": array_cos}, "numpy"],
-                                     cse=True)
+        numeric = [_for_numpy(e) for e in self._exprs]
+        if any(e.has(sp.zoo, sp.nan) for e in numeric):
+            raise ExpressionError(f"x = {quote(str(self.x_expr))}, y = {quote(str(self.y_expr))}: a constant "
+                                  "divides by zero in floating point")
+        self._evaluate = sp.lambdify(T, numeric, modules=[{"sin": array_sin, "cos": array_cos}, "numpy"], cse=True)
 
     @classmethod
     def from_strings(cls, x: str, y: str, direction: int = FORWARD, default_duration: float | None = None,
@@ -117,19 +120,24 @@ class ExpressionReference(Reference):
             return f"{shown} is not smooth"
         argument = function.args[0]
         horizon = self.default_duration if _positive(self.default_duration) else SEARCH_HORIZON
-        evaluate = sp.lambdify(T, argument, "numpy")
+        compiled = sp.lambdify(T, _for_numpy(argument), "numpy")
+
+        def evaluate(times: np.ndarray) -> np.ndarray:  # real values, NaN where complex or undefined
+            with np.errstate(all="ignore"):
+                values = np.broadcast_to(np.asarray(compiled(times), dtype=complex), times.shape)
+            return np.where(np.abs(values.imag) < 1e-12, values.real, np.nan)
+
         grid = np.linspace(0.0, horizon, 10_001)
-        with np.errstate(all="ignore"):
-            values = np.broadcast_to(np.asarray(evaluate(grid), dtype=complex), grid.shape)
-        values = np.where(np.abs(values.imag) < 1e-12, values.real, np.nan)
+        values = evaluate(grid)
         zero = np.flatnonzero(values == 0)
         change = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
         candidates = [grid[zero[0]]] if zero.size else []
         if change.size:
             i = change[0]
             try:
-                candidates.append(brentq(lambda s: float(np.real(evaluate(s))), grid[i], grid[i + 1], xtol=1e-12))
-            except ValueError:  # the sign change is a pole or numerical noise: keep the grid point
+                candidates.append(brentq(lambda s: float(evaluate(np.array([s]))[0]), grid[i], grid[i + 1],
+                                         xtol=1e-12))
+            except (ValueError, RuntimeError):  # a pole, or not converging: keep the grid point
                 candidates.append(grid[i])
         where = f"{shown} is not smooth where {quote(str(argument))} = 0"
         if not candidates:
@@ -163,6 +171,21 @@ def _derivatives(expr: sp.Expr, label: str) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
         if derivative.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
             raise ExpressionError(f"{_ORDER[order]}{label} = {quote(str(expr))} is not finite")
     return expr, first, second
+
+
+def _for_numpy(expr: sp.Expr) -> sp.Expr:
+    """``expr`` with each constant part as one float, evaluated by sympy to full precision:
+    numpy's functions refuse Python integers beyond int64 (``arctan(10**300)``), and a
+    constant that cancels in floating point would divide by zero as Python floats."""
+    if expr.is_Rational:
+        return sp.Float(expr, 17) if max(abs(expr.p), expr.q) >= 2**53 else expr
+    if expr.is_number and not expr.is_Number and not expr.is_NumberSymbol:
+        value = expr.evalf(17)
+        return value if value.is_Number else expr
+    if not expr.args:
+        return expr
+    args = [_for_numpy(a) for a in expr.args]
+    return expr if all(a is b for a, b in zip(args, expr.args)) else expr.func(*args)
 
 
 def _parameters(parameters) -> dict[str, sp.Rational]:
