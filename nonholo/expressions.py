@@ -33,10 +33,11 @@ import sys
 import tokenize
 import unicodedata
 from collections.abc import Mapping
+from contextlib import contextmanager
 
 import sympy as sp
 
-from nonholo.errors import ExpressionError
+from nonholo.errors import ExpressionError, NonholoInputError
 from nonholo.tomlfile import describe_value
 
 FUNCTIONS = {
@@ -109,9 +110,23 @@ def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None 
         raise ExpressionError(f"formula too complex to parse in {where}") from None
     if _nesting(tree.body) > MAX_NESTING:
         raise ExpressionError(f"formula nested more than {MAX_NESTING} levels deep in {where}")
-    expression = _Builder(names, source, where).build(tree.body)
-    check_constants(expression, where)
+    with sympy_failures(where):
+        expression = _Builder(names, source, where).build(tree.body)
+        check_constants(expression, where)
     return expression
+
+
+@contextmanager
+def sympy_failures(where: str):
+    """Any failure of sympy itself while working on a formula (one of its bugs, an
+    overflow, a recursion) as one ``ExpressionError`` line naming ``where``."""
+    try:
+        yield
+    except NonholoInputError:
+        raise
+    except (ArithmeticError, AttributeError, LookupError, TypeError, ValueError, RecursionError,
+            MemoryError) as error:
+        raise ExpressionError(f"sympy cannot handle {where} ({type(error).__name__}: {quote(str(error))})") from None
 
 
 def quote(text: str) -> str:
@@ -355,6 +370,8 @@ class _Builder:
                                 f"(at most {int(MAX_POWER_BITS * 0.30103):,})")
         if base.is_zero and exponent.is_negative:
             self.fail(node, "division by zero")
+        if base.is_number and base.is_negative and not exponent.is_number and not exponent.is_integer:
+            self.fail(node, "not real: a negative number to a power that need not be an integer")
         return self.checked(sp.Pow(base, exponent), node)
 
     def call(self, node: ast.Call) -> sp.Expr:
@@ -367,11 +384,21 @@ class _Builder:
         return self.checked(function(*(self.build(argument) for argument in node.args)), node)
 
     def checked(self, value: sp.Expr, node: ast.AST) -> sp.Expr:
-        """``value``, unless sympy made it infinite or undefined (1/0, log(0), tan(pi/2))."""
+        """``value``, unless sympy made it infinite or undefined (1/0, log(0), tan(pi/2)),
+        or it is a constant beyond the floating-point range or not real. Constants are
+        checked as they are built, so sympy never evaluates a function of a huge number
+        (``tan(cosh(1e20))`` would need pi to 10^20 digits)."""
         if value in _NON_FINITE:
             self.fail(node, "not finite (a division by zero or an undefined value)")
-        if value.is_Number and _too_large(value):
-            self.fail(node, f"beyond the floating-point range (about 1e{_log10(value):.0f})")
+        if value.is_Number:
+            if _too_large(value):
+                self.fail(node, f"beyond the floating-point range (about 1e{_log10(value):.0f})")
+        elif value.is_number:  # a constant such as cosh(20): its arguments are checked already
+            number = complex(value.evalf(20))
+            if not (math.isfinite(number.real) and math.isfinite(number.imag)):
+                self.fail(node, "beyond the floating-point range")
+            if abs(number.imag) > 1e-12 * max(1.0, abs(number.real)):
+                self.fail(node, "not a real number")
         return value
 
 

@@ -84,7 +84,11 @@ FORMULAS = [
     ("tan(pi/2) + t", ExpressionError, "'tan(pi/2)': not finite"),
     ("t/sin(pi)", ExpressionError, "'t/sin(pi)': division by zero"),
     ("atan2(0, 0) + t", ExpressionError, "not finite"),
-    ("sqrt(-1)*t", ExpressionError, "is not real"),
+    ("(-2)^t", ExpressionError, "'(-2)**t': not real: a negative number to a power"),
+    ("log(1e-300)**t", ExpressionError, "not real: a negative number to a power"),
+    ("sqrt(-1)*t", ExpressionError, "'sqrt(-1)': not a real number"),
+    ("asin(2)*t", ExpressionError, "'asin(2)': not a real number"),
+    ("tan(cosh(99999999999999999999))*t", ExpressionError, "'cosh(99999999999999999999)': beyond the floating-point range"),
     ("0**t", ExpressionError, "first derivative of x = '0**t' is not finite"),
     # not smooth: named, with the time where it fails
     ("Abs(t-3)", InfeasibleReferenceError, "'Abs(t - 3)' is not smooth where 't - 3' = 0, first at t = 3 s"),
@@ -132,6 +136,24 @@ def test_hostile_formula_is_one_line_of_the_right_type(formula, error, fragment)
 
 def test_formula_errors_name_the_coordinate():
     assert refused(lambda: references.expression("t", "q*t")).startswith("unknown symbol 'q' in y = 'q*t'")
+
+
+def test_constants_are_evaluated_exactly_before_numpy_sees_them():
+    """Found by fuzzing: numpy's arctan refuses a Python integer beyond int64, and this
+    denominator cancels to 0 in floating point (0.41 exactly)."""
+    ref = references.expression("1/(100000000000000000000 - 31830988618379067153*pi) + atan(10^300)*t", "t")
+    assert ref.table([0.0, 1.0])[:, 1] == pytest.approx([0.4097956745, 0.4097956745 + np.pi / 2])
+
+
+def test_a_failure_of_sympy_itself_is_one_line():
+    """Found by fuzzing: sympy 1.14 raises a bare ValueError while simplifying this (a bug
+    in its factorisation); should sympy learn it, the reference must simply work."""
+    try:
+        ref = references.expression("1e300 + cos(atan2(2, 1e-300)) + t", "t")
+    except ExpressionError as exc:
+        assert str(exc).startswith("sympy cannot handle x = '1e300 + cos(atan2(2, 1e-300)) + t' (ValueError")
+    else:
+        assert np.isfinite(ref.table([0.0])).all()
 
 
 def test_big_but_honest_formulas_work_quickly():

@@ -24,8 +24,8 @@ import sympy as sp
 from scipy.optimize import brentq
 
 from nonholo.errors import ExpressionError, InfeasibleReferenceError, ScenarioError
-from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number, expression_size,
-                                 parse_expression, quote)
+from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number,
+                                 expression_size, parse_expression, quote, sympy_failures)
 from nonholo.numerics import array_cos, array_sin
 from nonholo.references.base import FORWARD, Reference
 
@@ -63,16 +63,18 @@ class ExpressionReference(Reference):
         self.x_expr = _formula(x, "x")
         self.y_expr = _formula(y, "y")
         self.parameters = dict(parameters or {})
-        derivatives = [_derivatives(expr, label) for expr, label in ((self.x_expr, "x"), (self.y_expr, "y"))]
-        (x0, x1, x2), (y0, y1, y2) = derivatives
-        self._exprs = (x0, y0, x1, y1, x2, y2)
-        self._check_smooth()
-        if sum(expression_size(e, MAX_COMPILED_NODES) for e in self._exprs) > MAX_COMPILED_NODES:
-            raise ExpressionError(f"the formulas and their derivatives have more than {MAX_COMPILED_NODES:,} "
-                                  "nodes together: write a smaller formula")
-        # sin and cos dominate the cost of evaluating a reference table: use the SIMD ones.
-        self._evaluate = sp.lambdify(T, list(self._exprs), modules=[{"sin": array_sin, "cos": array_cos}, "numpy"],
-                                     cse=True)
+        with sympy_failures(f"x = {quote(str(self.x_expr))}, y = {quote(str(self.y_expr))}"):
+            derivatives = [_derivatives(expr, label) for expr, label in ((self.x_expr, "x"), (self.y_expr, "y"))]
+            (x0, x1, x2), (y0, y1, y2) = derivatives
+            self._exprs = (x0, y0, x1, y1, x2, y2)
+            self._check_smooth()
+            if sum(expression_size(e, MAX_COMPILED_NODES) for e in self._exprs) > MAX_COMPILED_NODES:
+                raise ExpressionError(f"the formulas and their derivatives have more than {MAX_COMPILED_NODES:,} "
+                                      "nodes together: write a smaller formula")
+            numeric = [_for_numpy(e, label) for e, label in zip(self._exprs, ("x", "y") * 3)]
+            # sin and cos dominate the cost of evaluating a reference table: use the SIMD ones.
+            self._evaluate = sp.lambdify(T, numeric, modules=[{"sin": array_sin, "cos": array_cos}, "numpy"],
+                                         cse=True)
 
     @classmethod
     def from_strings(cls, x: str, y: str, direction: int = FORWARD, default_duration: float | None = None,
@@ -117,19 +119,24 @@ class ExpressionReference(Reference):
             return f"{shown} is not smooth"
         argument = function.args[0]
         horizon = self.default_duration if _positive(self.default_duration) else SEARCH_HORIZON
-        evaluate = sp.lambdify(T, argument, "numpy")
+        compiled = sp.lambdify(T, _for_numpy(argument, "the argument"), "numpy")
+
+        def evaluate(times: np.ndarray) -> np.ndarray:  # real values, NaN where complex or undefined
+            with np.errstate(all="ignore"):
+                values = np.broadcast_to(np.asarray(compiled(times), dtype=complex), times.shape)
+            return np.where(np.abs(values.imag) < 1e-12, values.real, np.nan)
+
         grid = np.linspace(0.0, horizon, 10_001)
-        with np.errstate(all="ignore"):
-            values = np.broadcast_to(np.asarray(evaluate(grid), dtype=complex), grid.shape)
-        values = np.where(np.abs(values.imag) < 1e-12, values.real, np.nan)
+        values = evaluate(grid)
         zero = np.flatnonzero(values == 0)
         change = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
         candidates = [grid[zero[0]]] if zero.size else []
         if change.size:
             i = change[0]
             try:
-                candidates.append(brentq(lambda s: float(np.real(evaluate(s))), grid[i], grid[i + 1], xtol=1e-12))
-            except ValueError:  # the sign change is a pole or numerical noise: keep the grid point
+                candidates.append(brentq(lambda s: float(evaluate(np.array([s]))[0]), grid[i], grid[i + 1],
+                                         xtol=1e-12))
+            except (ValueError, RuntimeError):  # a pole, or not converging: keep the grid point
                 candidates.append(grid[i])
         where = f"{shown} is not smooth where {quote(str(argument))} = 0"
         if not candidates:
@@ -163,6 +170,26 @@ def _derivatives(expr: sp.Expr, label: str) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
         if derivative.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
             raise ExpressionError(f"{_ORDER[order]}{label} = {quote(str(expr))} is not finite")
     return expr, first, second
+
+
+def _for_numpy(expr: sp.Expr, label: str) -> sp.Expr:
+    """``expr`` with each constant part as one float, evaluated by sympy to full precision:
+    numpy's functions refuse Python integers beyond int64 (``arctan(10**300)``), and a
+    constant that cancels in floating point would divide by zero as Python floats.
+    ``ExpressionError`` for a constant that is not a finite real number (in a derivative of
+    ``label``: ``(-2)**t`` brings ``log(-2)``)."""
+    if expr.is_Rational:
+        return sp.Float(expr, 17) if max(abs(expr.p), expr.q) >= 2**53 else expr
+    if expr.is_number and not expr.is_Number and not expr.is_NumberSymbol:
+        value = expr.evalf(17)
+        if not (value.is_Number and value.is_finite):
+            raise ExpressionError(f"{label} or its derivatives have the constant {quote(str(expr))}, which is not "
+                                  "a finite real number")
+        return value
+    if not expr.args:
+        return expr
+    args = [_for_numpy(a, label) for a in expr.args]
+    return expr if all(a is b for a, b in zip(args, expr.args)) else expr.func(*args)
 
 
 def _parameters(parameters) -> dict[str, sp.Rational]:
