@@ -62,7 +62,8 @@ sympy's differentiation and printing recurse about ten frames per level."""
 MAX_NAME_LENGTH = 64
 """Characters of a declared name (a state, input or parameter)."""
 MAX_EXPONENT = 1_000
-"""Largest |exponent| of a power whose exponent is a number."""
+"""Largest |exponent| of a power whose exponent is a number; a fractional exponent whose
+denominator is larger (a root of higher degree) is used as a float."""
 MAX_POWER_BITS = 4_096
 """Largest exact number a power may build (bits): a power of numbers is computed exactly,
 and so is the numeric factor of a power of a product ((2*t)**n is 2**n * t**n)."""
@@ -360,6 +361,9 @@ class _Builder:
 
     def power(self, node: ast.BinOp) -> sp.Expr:
         base, exponent = self.build(node.left), self.build(node.right)
+        if exponent.is_Rational and exponent.q > MAX_EXPONENT:
+            # a root of high degree: sympy would look for it exactly (2**(1/10**300) takes hours)
+            exponent = sp.Float(exponent, 17)
         if exponent.is_Number:
             if abs(exponent) > MAX_EXPONENT:
                 self.fail(node, f"exponent {_short_number(exponent)} is too large (at most {MAX_EXPONENT:,} in size)")

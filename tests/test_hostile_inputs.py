@@ -145,6 +145,14 @@ def test_constants_are_evaluated_exactly_before_numpy_sees_them():
     assert ref.table([0.0, 1.0])[:, 1] == pytest.approx([0.4097956745, 0.4097956745 + np.pi / 2])
 
 
+def test_roots_of_high_degree_are_taken_as_floats():
+    """Found by fuzzing: sympy looks for 2**(1/10**300) exactly, for hours."""
+    started = time.perf_counter()
+    ref = references.expression("2**(1/10**300)*t + cos(t)**99999999999999999999**1e-300", "t")
+    assert time.perf_counter() - started < SECONDS
+    assert ref.table([0.0])[0, 1] == pytest.approx(1.0)
+
+
 def test_a_failure_of_sympy_itself_is_one_line():
     """Found by fuzzing: sympy 1.14 raises a bare ValueError while simplifying this (a bug
     in its factorisation); should sympy learn it, the reference must simply work."""
