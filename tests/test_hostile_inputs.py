@@ -3,11 +3,14 @@ the command line. Every case must end, quickly and in bounded memory, in one lin
 documented error type that names the field; never a traceback."""
 import argparse
 import doctest
+import io
 import os
+import re
 import subprocess
 import sys
 import time
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -398,6 +401,22 @@ def test_describe_value_is_short_whatever_the_value():
 
 def test_tomlfile_examples():
     assert doctest.testmod(nonholo.tomlfile).failed == 0
+
+
+def test_a_short_seeded_fuzz_run_finds_nothing(tmp_path):
+    """2,000 random and mutated formulas, waypoints and system files (``tests/fuzz_inputs.py``
+    runs longer): each a result or one NonholoInputError line, none slow."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    try:
+        import fuzz_inputs
+    finally:
+        sys.path.pop(0)
+    report = io.StringIO()
+    findings = fuzz_inputs.run(120, 10, tmp_path, kinds=("formula", "waypoints", "system"), out=report, cases=2000)
+    assert findings == [], report.getvalue()
+    for line in report.getvalue().splitlines()[:3]:  # each kind: some inputs accepted, some refused
+        tried, refused = (int(n.replace(",", "")) for n in re.findall(r"[\d,]+(?= cases| refused)", line))
+        assert tried > refused > 0, line
 
 
 # ---------------------------------------------------------------- command line
