@@ -215,7 +215,7 @@ def _scan(source: str) -> str | None:
                 if len(string) > _MAX_NUMBER_LENGTH:
                     return f"number of more than {_MAX_NUMBER_LENGTH} characters"
                 if not _DECIMAL.fullmatch(string):
-                    return f"{string!r} is not a decimal number"
+                    return f"{quote(string)} is not a decimal number"
             elif kind == tokenize.NAME:
                 name = string
                 if keyword.iskeyword(string):
@@ -226,7 +226,8 @@ def _scan(source: str) -> str | None:
                         return _unknown_function(name)
                     runs.append(0)
                 elif string == ")":
-                    runs.pop() if len(runs) > 1 else None
+                    if len(runs) > 1:  # an unmatched ")" is left to the parser
+                        runs.pop()
                 elif string == "**" or (string in "+-" and previous in _UNARY_CONTEXT):
                     runs[-1] += 1
                 else:
