@@ -62,7 +62,8 @@ sympy's differentiation and printing recurse about ten frames per level."""
 MAX_NAME_LENGTH = 64
 """Characters of a declared name (a state, input or parameter)."""
 MAX_EXPONENT = 1_000
-"""Largest |exponent| of a power whose exponent is a number."""
+"""Largest |exponent| of a power whose exponent is a number; a fractional exponent whose
+denominator is larger (a root of higher degree) is used as a float."""
 MAX_POWER_BITS = 4_096
 """Largest exact number a power may build (bits): a power of numbers is computed exactly,
 and so is the numeric factor of a power of a product ((2*t)**n is 2**n * t**n)."""
@@ -214,7 +215,7 @@ def _scan(source: str) -> str | None:
                 if len(string) > _MAX_NUMBER_LENGTH:
                     return f"number of more than {_MAX_NUMBER_LENGTH} characters"
                 if not _DECIMAL.fullmatch(string):
-                    return f"{string!r} is not a decimal number"
+                    return f"{quote(string)} is not a decimal number"
             elif kind == tokenize.NAME:
                 name = string
                 if keyword.iskeyword(string):
@@ -225,7 +226,8 @@ def _scan(source: str) -> str | None:
                         return _unknown_function(name)
                     runs.append(0)
                 elif string == ")":
-                    runs.pop() if len(runs) > 1 else None
+                    if len(runs) > 1:  # an unmatched ")" is left to the parser
+                        runs.pop()
                 elif string == "**" or (string in "+-" and previous in _UNARY_CONTEXT):
                     runs[-1] += 1
                 else:
@@ -360,6 +362,9 @@ class _Builder:
 
     def power(self, node: ast.BinOp) -> sp.Expr:
         base, exponent = self.build(node.left), self.build(node.right)
+        if exponent.is_Rational and exponent.q > MAX_EXPONENT:
+            # a root of high degree: sympy would look for it exactly (2**(1/10**300) takes hours)
+            exponent = sp.Float(exponent, 17)
         if exponent.is_Number:
             if abs(exponent) > MAX_EXPONENT:
                 self.fail(node, f"exponent {_short_number(exponent)} is too large (at most {MAX_EXPONENT:,} in size)")

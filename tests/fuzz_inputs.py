@@ -137,17 +137,18 @@ def case_system(rng: random.Random, directory: Path):
 KINDS = ("formula", "waypoints", "scenario", "system")
 
 
-def run(seconds: float, seed: int, directory: Path, kinds=KINDS, out=sys.stdout, keep=None) -> list[str]:
-    """Fuzz ``kinds`` of input for ``seconds``; the findings (empty if none). The inputs of
-    slow cases are appended to ``keep`` if given."""
+def run(seconds: float, seed: int, directory: Path, kinds=KINDS, out=sys.stdout, keep=None,
+        cases: int | None = None) -> list[str]:
+    """Fuzz ``kinds`` of input for ``seconds`` (or ``cases`` cases); the findings (empty if
+    none). The inputs of slow cases are appended to ``keep`` if given."""
     rng = random.Random(seed)
-    cases = {"formula": case_formula, "waypoints": case_waypoints, "scenario": case_scenario,
-             "system": lambda r: case_system(r, directory)}
-    kinds = {kind: cases[kind] for kind in kinds}
+    runners = {"formula": case_formula, "waypoints": case_waypoints, "scenario": case_scenario,
+               "system": lambda r: case_system(r, directory)}
+    kinds = {kind: runners[kind] for kind in kinds}
     counts = {kind: [0, 0] for kind in kinds}  # tried, refused
     findings, slowest = [], (0.0, "")
     deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and (cases is None or sum(c[0] for c in counts.values()) < cases):
         kind = rng.choice(list(kinds))
         CURRENT[0] = ""
         started = time.perf_counter()

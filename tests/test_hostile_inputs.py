@@ -3,11 +3,14 @@ the command line. Every case must end, quickly and in bounded memory, in one lin
 documented error type that names the field; never a traceback."""
 import argparse
 import doctest
+import io
 import os
+import re
 import subprocess
 import sys
 import time
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -143,6 +146,14 @@ def test_constants_are_evaluated_exactly_before_numpy_sees_them():
     denominator cancels to 0 in floating point (0.41 exactly)."""
     ref = references.expression("1/(100000000000000000000 - 31830988618379067153*pi) + atan(10^300)*t", "t")
     assert ref.table([0.0, 1.0])[:, 1] == pytest.approx([0.4097956745, 0.4097956745 + np.pi / 2])
+
+
+def test_roots_of_high_degree_are_taken_as_floats():
+    """Found by fuzzing: sympy looks for 2**(1/10**300) exactly, for hours."""
+    started = time.perf_counter()
+    ref = references.expression("2**(1/10**300)*t + cos(t)**99999999999999999999**1e-300", "t")
+    assert time.perf_counter() - started < SECONDS
+    assert ref.table([0.0])[0, 1] == pytest.approx(1.0)
 
 
 def test_a_failure_of_sympy_itself_is_one_line():
@@ -390,6 +401,22 @@ def test_describe_value_is_short_whatever_the_value():
 
 def test_tomlfile_examples():
     assert doctest.testmod(nonholo.tomlfile).failed == 0
+
+
+def test_a_short_seeded_fuzz_run_finds_nothing(tmp_path):
+    """2,000 random and mutated formulas, waypoints and system files (``tests/fuzz_inputs.py``
+    runs longer): each a result or one NonholoInputError line, none slow."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    try:
+        import fuzz_inputs
+    finally:
+        sys.path.pop(0)
+    report = io.StringIO()
+    findings = fuzz_inputs.run(120, 10, tmp_path, kinds=("formula", "waypoints", "system"), out=report, cases=2000)
+    assert findings == [], report.getvalue()
+    for line in report.getvalue().splitlines()[:3]:  # each kind: some inputs accepted, some refused
+        tried, refused = (int(n.replace(",", "")) for n in re.findall(r"[\d,]+(?= cases| refused)", line))
+        assert tried > refused > 0, line
 
 
 # ---------------------------------------------------------------- command line
