@@ -110,6 +110,14 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
+KEY_LIMIT = 40
+
+
+def _key(name: str) -> str:
+    """A field name from the file, shortened for an error line."""
+    return name if len(name) <= KEY_LIMIT else name[:KEY_LIMIT - 3] + "..."
+
+
 class _Reader:
     """Validates one parsed file; every error names the file and the field."""
 
@@ -125,7 +133,8 @@ class _Reader:
         if allowed is not None:
             unknown = sorted(set(data) - allowed)
             if unknown:
-                self.fail(f"{field}.{unknown[0]}" if field else unknown[0],
+                key = _key(unknown[0])
+                self.fail(f"{field}.{key}" if field else key,
                           f"unknown field (expected one of: {', '.join(sorted(allowed))})")
         return data
 
@@ -225,9 +234,9 @@ class _Reader:
         variant = self.string(data.get("variant", variant or spec.variants[0]), f"{where}.variant", spec.variants)
         for gain, value in gains.items():
             if gain not in spec.accepted_gains:
-                self.fail(f"{where}.gains.{gain}",
+                self.fail(f"{where}.gains.{_key(gain)}",
                           f"unknown gain for {controller_name} (gains: {', '.join(spec.accepted_gains)})")
-            self.number(value, f"{where}.gains.{gain}")
+            self.number(value, f"{where}.gains.{_key(gain)}")
         try:
             config = spec.configure(gains, variant)
         except NonholoInputError as exc:
