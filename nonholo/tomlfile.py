@@ -168,9 +168,10 @@ def describe_value(value, limit: int = DESCRIBE_LIMIT, *, typed: bool = True) ->
     shown = _SHORT.repr(value)
     if len(shown) > limit:
         shown = shown[:max(limit - 3, 1)] + "..."
+    shown_items = _SHORT.maxdict if isinstance(value, dict) else _SHORT.maxlist
     if isinstance(value, str) and len(value) > _SHORT.maxstring:
         size = f"{len(value):,} characters"
-    elif isinstance(value, (list, tuple, dict, set)) and len(value) > (_SHORT.maxdict if isinstance(value, dict) else _SHORT.maxlist):
+    elif isinstance(value, (list, tuple, dict, set)) and len(value) > shown_items:
         size = f"{len(value):,} items"
     else:
         size = None

@@ -94,7 +94,8 @@ FORMULAS = [
     ("log(1e-300)**t", ExpressionError, "not real: a negative number to a power"),
     ("sqrt(-1)*t", ExpressionError, "'sqrt(-1)': not a real number"),
     ("asin(2)*t", ExpressionError, "'asin(2)': not a real number"),
-    ("tan(cosh(99999999999999999999))*t", ExpressionError, "'cosh(99999999999999999999)': beyond the floating-point range"),
+    ("tan(cosh(99999999999999999999))*t", ExpressionError,
+     "'cosh(99999999999999999999)': beyond the floating-point range"),
     ("0**t", ExpressionError, "first derivative of x = '0**t' is not finite"),
     # not smooth: named, with the time where it fails
     ("Abs(t-3)", InfeasibleReferenceError, "'Abs(t - 3)' is not smooth where 't - 3' = 0, first at t = 3 s"),
