@@ -17,10 +17,13 @@ deeply or computes a huge number (every violation is one ``ExpressionError`` lin
 * only plain decimal numbers (no ``0x10``, ``1_000``, ``1j``), each finite in floating
   point; no control or invisible characters, no character that Python would silently
   read as another (``ｔ`` is ``t``);
-* a numeric exponent at most ``MAX_EXPONENT`` in size, and no power that would build an
-  exact number of more than ``MAX_POWER_BITS`` bits (``10**10**10`` would take hours);
+* a numeric exponent at most ``MAX_EXPONENT`` in size (``MAX_COMPLEX_EXPONENT`` if the
+  base may be complex), and no power that would build an exact number of more than
+  ``MAX_POWER_BITS`` bits (``10**10**10`` would take hours);
 * no infinite or undefined value (``1/0``, ``log(0)``) and no constant beyond the
-  floating-point range.
+  floating-point range;
+* at most ``MAX_SYMBOLIC_STEPS`` steps of symbolic work (``symbolic_budget``), the
+  backstop for what sympy does beyond these limits.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import keyword
 import math
 import re
 import sys
+import threading
 import tokenize
 import unicodedata
 from collections.abc import Mapping
@@ -64,6 +68,14 @@ MAX_NAME_LENGTH = 64
 MAX_EXPONENT = 1_000
 """Largest |exponent| of a power whose exponent is a number; a fractional exponent whose
 denominator is larger (a root of higher degree) is used as a float."""
+MAX_COMPLEX_EXPONENT = 16
+"""Largest |exponent| of a power whose base sympy cannot prove real (acos(t), log(t),
+sqrt(t - 1)): deciding the sign of a function of it, sympy expands the power into real
+and imaginary parts, in loops of big-integer arithmetic (1.5 s at 16, 8 s at 64, minutes
+at 1,000) that no step count sees."""
+MAX_SYMBOLIC_STEPS = 10_000_000
+"""Python function calls that sympy may make for one formula (``symbolic_budget``): about
+three times what the largest accepted formulas need (3.5 million, 1.3 s here)."""
 MAX_POWER_BITS = 4_096
 """Largest exact number a power may build (bits): a power of numbers is computed exactly,
 and so is the numeric factor of a power of a product ((2*t)**n is 2**n * t**n)."""
@@ -79,6 +91,7 @@ _ALLOWED = "use numbers, names, + - * / ^ and functions"
 _NON_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 _ADD, _MUL = (ast.Add, ast.Sub), (ast.Mult, ast.Div)
 _SHOWN = 60  # characters of a formula quoted in a message
+_BUDGET = threading.local()  # .active: a symbolic budget runs in this thread
 
 
 def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None = None) -> sp.Expr:
@@ -111,10 +124,54 @@ def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None 
         raise ExpressionError(f"formula too complex to parse in {where}") from None
     if _nesting(tree.body) > MAX_NESTING:
         raise ExpressionError(f"formula nested more than {MAX_NESTING} levels deep in {where}")
-    with sympy_failures(where):
+    with symbolic_budget(where), sympy_failures(where):
         expression = _Builder(names, source, where).build(tree.body)
         check_constants(expression, where)
     return expression
+
+
+class _OverBudget(BaseException):
+    """Raised inside sympy by the step counter of ``symbolic_budget``: a BaseException, so
+    that sympy's own ``except Exception`` clauses cannot swallow it."""
+
+
+@contextmanager
+def symbolic_budget(where: str):
+    """Bound the symbolic work done in this block to ``MAX_SYMBOLIC_STEPS`` Python function
+    calls, else one ``ExpressionError`` line naming ``where``. Blocks nested in a bounded
+    one share its budget.
+
+    The size limits above keep honest formulas well inside it; this is the backstop for
+    what they cannot foresee: sympy's assumption system expands, for example, the real and
+    imaginary parts of ``(acos(t) + asin(t) + log(t))**12`` to decide the sign of a cosh of
+    it (5 s), and more for larger exponents. Counting calls with a trace function is
+    portable (no signal, no thread, no process) and deterministic: a formula is accepted or
+    refused alike on every machine and under any load. It slows the bounded work about
+    2.5 times; any other tracer (a debugger, coverage) keeps being called.
+    """
+    if getattr(_BUDGET, "active", False):
+        yield
+        return
+    previous, steps = sys.gettrace(), 0
+    limit = MAX_SYMBOLIC_STEPS
+
+    def count(frame, event, arg):
+        nonlocal steps
+        steps += 1
+        if steps > limit:
+            raise _OverBudget
+        return previous(frame, event, arg) if previous is not None else None
+
+    _BUDGET.active = True
+    sys.settrace(count)
+    try:
+        yield
+    except _OverBudget:
+        raise ExpressionError(f"{where}: symbolic work beyond its budget of {limit:,} steps "
+                              "(write a simpler formula)") from None
+    finally:
+        sys.settrace(previous)
+        _BUDGET.active = False
 
 
 @contextmanager
@@ -368,6 +425,9 @@ class _Builder:
         if exponent.is_Number:
             if abs(exponent) > MAX_EXPONENT:
                 self.fail(node, f"exponent {_short_number(exponent)} is too large (at most {MAX_EXPONENT:,} in size)")
+            if abs(exponent) > MAX_COMPLEX_EXPONENT and base.is_extended_real is not True:
+                self.fail(node, f"exponent {_short_number(exponent)} is too large for a base that may be complex "
+                                f"(at most {MAX_COMPLEX_EXPONENT})")
             numbers = [base] if base.is_Rational else base.atoms(sp.Rational)
             bits = max((_bits(n) for n in numbers), default=0) * abs(exponent)
             if bits > MAX_POWER_BITS:

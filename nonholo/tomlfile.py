@@ -78,7 +78,7 @@ def parse_toml(text: str, source: str = "<toml>", *, max_bytes: int = MAX_BYTES)
         raise InputFileError(source, f"longer than {max_bytes:,} characters: not read")
     if text.startswith(_BOM):
         text = text[1:]
-    problem = nesting_problem(text)
+    problem = _nesting_problem(text)
     if problem:
         raise InputFileError(source, problem)
     try:
@@ -89,13 +89,13 @@ def parse_toml(text: str, source: str = "<toml>", *, max_bytes: int = MAX_BYTES)
         raise InputFileError(source, "not valid TOML: a number with too many digits") from None
     except RecursionError:  # not reached when the scan above is right; kept as a backstop
         raise InputFileError(source, f"nested more than {MAX_NESTING} levels deep") from None
-    depth = data_depth(data, MAX_NESTING + 1)
+    depth = _data_depth(data, MAX_NESTING + 1)
     if depth > MAX_NESTING:
         raise InputFileError(source, f"tables nested more than {MAX_NESTING} levels deep")
     return data
 
 
-def nesting_problem(text: str, limit: int = MAX_NESTING) -> str | None:
+def _nesting_problem(text: str, limit: int = MAX_NESTING) -> str | None:
     """Why ``text`` is nested too deeply for ``tomllib`` (None if it is not): more than
     ``limit`` arrays or inline tables inside one another, or a dotted key of more than
     ``limit`` parts. Regular expressions and one pass over the brackets; no recursion."""
@@ -105,7 +105,8 @@ def nesting_problem(text: str, limit: int = MAX_NESTING) -> str | None:
     # limit dots with no newline, "=", "," or bracket between them: a key of limit + 1 parts
     dotted = re.search(r"\.(?:[^\n=,\[\]{}.]*\.){%d}" % (limit - 1), bare)
     if dotted:
-        return f"line {bare.count(chr(10), 0, dotted.start()) + 1}: a dotted key of more than {limit} parts"
+        line = bare.count("\n", 0, dotted.start()) + 1
+        return f"line {line}: a dotted key of more than {limit} parts"
     depth = 0
     for match in _BRACKETS.finditer(bare):
         depth += 1 if match.group() in "[{" else -1
@@ -115,7 +116,7 @@ def nesting_problem(text: str, limit: int = MAX_NESTING) -> str | None:
     return None
 
 
-def data_depth(value, limit: int) -> int:
+def _data_depth(value, limit: int) -> int:
     """Nesting depth of dicts and lists in ``value`` (a scalar is 0), counted without
     recursion and no further than ``limit``."""
     deepest = 0
@@ -167,9 +168,10 @@ def describe_value(value, limit: int = DESCRIBE_LIMIT, *, typed: bool = True) ->
     shown = _SHORT.repr(value)
     if len(shown) > limit:
         shown = shown[:max(limit - 3, 1)] + "..."
+    shown_items = _SHORT.maxdict if isinstance(value, dict) else _SHORT.maxlist
     if isinstance(value, str) and len(value) > _SHORT.maxstring:
         size = f"{len(value):,} characters"
-    elif isinstance(value, (list, tuple, dict, set)) and len(value) > (_SHORT.maxdict if isinstance(value, dict) else _SHORT.maxlist):
+    elif isinstance(value, (list, tuple, dict, set)) and len(value) > shown_items:
         size = f"{len(value):,} items"
     else:
         size = None

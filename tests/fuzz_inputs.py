@@ -12,7 +12,9 @@ seeded version.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import random
+import signal
 import sys
 import time
 import traceback
@@ -135,6 +137,30 @@ def case_system(rng: random.Random, directory: Path):
 
 
 KINDS = ("formula", "waypoints", "scenario", "system")
+HUNG = 30.0  # seconds after which a case is stopped (where SIGALRM exists)
+
+
+class Hung(Exception):
+    """A case stopped by the watchdog."""
+
+
+@contextlib.contextmanager
+def _watchdog(seconds: float):
+    """Raise ``Hung`` in the case running after ``seconds`` (Unix; elsewhere no watchdog)."""
+    if not hasattr(signal, "SIGALRM"):
+        yield
+        return
+
+    def stop(signum, frame):
+        raise Hung()
+
+    previous = signal.signal(signal.SIGALRM, stop)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def run(seconds: float, seed: int, directory: Path, kinds=KINDS, out=sys.stdout, keep=None,
@@ -153,9 +179,13 @@ def run(seconds: float, seed: int, directory: Path, kinds=KINDS, out=sys.stdout,
         CURRENT[0] = ""
         started = time.perf_counter()
         try:
-            with np.errstate(all="ignore"), warnings.catch_warnings():
+            with np.errstate(all="ignore"), warnings.catch_warnings(), _watchdog(HUNG):
                 warnings.simplefilter("ignore")  # scipy's ill-conditioning warnings are expected here
                 kinds[kind](rng)
+        except Hung:
+            findings.append(f"{kind}: still running after {HUNG:.0f} s, stopped, for {CURRENT[0][:300]}")
+            if keep is not None:
+                keep.append(CURRENT[0])
         except NonholoInputError as exc:
             counts[kind][1] += 1
             message = str(exc)

@@ -25,7 +25,7 @@ from scipy.optimize import brentq
 
 from nonholo.errors import ExpressionError, InfeasibleReferenceError, ScenarioError
 from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number,
-                                 expression_size, parse_expression, quote, sympy_failures)
+                                 expression_size, parse_expression, quote, symbolic_budget, sympy_failures)
 from nonholo.numerics import array_cos, array_sin
 from nonholo.references.base import FORWARD, Reference
 
@@ -82,8 +82,9 @@ class ExpressionReference(Reference):
         """Parse ``x`` and ``y`` safely (no eval); ``parameters`` are named constants."""
         values = _parameters(parameters)
         names = {"t": T, **values}
-        return cls(parse_expression(x, names, "x"), parse_expression(y, names, "y"), direction, default_duration,
-                   {name: float(value) for name, value in values.items()})
+        with symbolic_budget(f"x = {quote(str(x))}, y = {quote(str(y))}"):
+            return cls(parse_expression(x, names, "x"), parse_expression(y, names, "y"), direction,
+                       default_duration, {name: float(value) for name, value in values.items()})
 
     def flat_outputs(self, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=float)
