@@ -19,7 +19,7 @@ from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 # ------------------------------------------------------------------ laws of this module
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy")
 def proportional_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """v = v_d + k e1,  ω = ω_d + k e3 (plus a lateral term kl v_d e2)."""
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
@@ -97,6 +97,19 @@ def test_the_registered_law_is_validated_like_the_built_in_ones(registered):
         nonholo.controller("test-proportional", kl=-1.0)
     with pytest.raises(NonholoInputError, match=r"unknown variant 'sine' of test-proportional \(valid: default\)"):
         nonholo.controller("test-proportional", "sine")
+
+
+def test_every_law_states_its_floating_point_options(registered):
+    """numba compiles a function without its own fastmath choice with the options of the code
+    that calls it first: a law first called by a kernel that fuses multiply-adds would keep
+    them everywhere, and a formation's result would depend on what ran before it (seen: the
+    wedge's near-singular passage moved from t = 7.25 s to 7.83 s)."""
+    from nonholo.control.formation import separation_bearing_law, separation_separation_law
+    laws = [law for spec in (*CONTROLLERS.values(), *POSTURE_CONTROLLERS.values()) for law in spec.laws.values()]
+    assert proportional_law in laws   # registered from this module with @njit(error_model="numpy") only
+    for law in laws + [separation_bearing_law, separation_separation_law]:
+        assert law.targetoptions.get("fastmath") is False, law
+        assert law.targetoptions.get("error_model") == "numpy", law
 
 
 def test_built_in_declarations():

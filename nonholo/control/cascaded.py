@@ -28,7 +28,7 @@ def _driving_speed(c2, c3, e1, e2, v_d, omega_d):
              source="thesis §4.4 Eq 4.24-4.25; spec §3.3; Panteley, Lefeber, Loria & Nijmeijer 1998",
              gains={"c1": Gain(216.9, POSITIVE), "c2": Gain(1.355, POSITIVE), "c3": Gain(-0.414, ABOVE_MINUS_ONE)},
              stiffness=lambda g, v_d, omega_d: max(g["c1"], g["c2"], abs(g["c3"]) * omega_d))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def cascaded_linear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     c1, c2, c3 = gains.c1, gains.c2, gains.c3
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
@@ -37,7 +37,7 @@ def cascaded_linear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 
 
 @control_law.variant("cascaded", "sine")
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def cascaded_sine_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     c1, c2, c3 = gains.c1, gains.c2, gains.c3
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]

@@ -4,7 +4,7 @@ rules, its stiffness and its internal state (docs/controllers-api.md has the rec
     @control_law("kanayama", title="Stable tracking (linearized error model)", source="thesis §4.5 Eq 4.26",
                  gains={"kx": Gain(10.0, POSITIVE), "ky": Gain(0.0064, POSITIVE), "ktheta": Gain(0.16, POSITIVE)},
                  stiffness=lambda g, v_d, omega_d: max(g["kx"], v_d * (math.sqrt(g["ky"]) + g["ktheta"])))
-    @njit(inline="always", error_model="numpy")
+    @njit(error_model="numpy", fastmath=False)
     def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
         ... gains.kx, gains.ky, gains.ktheta ...
 
@@ -271,7 +271,7 @@ def _fail(name, problem: str):
 def _check_function(name, variant: str, function) -> None:
     py_func = getattr(function, "py_func", None)
     if py_func is None or not callable(function):
-        _fail(name, f"variant {variant!r} must be a compiled law (decorate it with @njit(inline=\"always\") "
+        _fail(name, f"variant {variant!r} must be a compiled law (decorate it with @njit(error_model=\"numpy\") "
                     f"below @control_law), got {function!r}")
     try:
         parameters = inspect.signature(py_func).parameters.values()
@@ -283,6 +283,14 @@ def _check_function(name, variant: str, function) -> None:
         found = ", ".join(map(str, parameters))
         _fail(name, f"variant {variant!r} ({py_func.__qualname__}) has the signature ({found}), "
                     f"expected ({', '.join(LAW_PARAMETERS)}) without defaults")
+    # numba compiles a function that does not choose its floating-point options with those of
+    # the compiled code that calls it first: a law first called by a kernel that fuses
+    # multiply-adds would keep them in every later kernel, and results would depend on the
+    # order of runs. A law states its own (IEEE, no fusion) unless it chose otherwise.
+    options = getattr(function, "targetoptions", None)
+    if isinstance(options, dict):
+        options.setdefault("fastmath", False)
+        options.setdefault("error_model", "numpy")
 
 
 def _gain_tuple(name: str, fields: tuple[str, ...], module_name: str) -> type:

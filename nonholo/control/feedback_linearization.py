@@ -41,7 +41,7 @@ from nonholo.references.feedforward import (REF_DDX, REF_DDY, REF_DX, REF_DY, RE
              source="thesis §4.8 Eq 4.34-4.38; spec §3.5; De Luca, Oriolo & Vendittelli 2001",
              gains={"d": Gain(0.5, NONZERO), "k1": Gain(1.0, POSITIVE), "k2": Gain(1.0, POSITIVE)},
              stiffness=lambda g, v_d, omega_d: max(g["k1"], g["k2"], (v_d + abs(g["d"]) * omega_d) / abs(g["d"])))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     d, k1, k2 = gains.d, gains.k1, gains.k2
     sin_d, cos_d = sincos(ref[REF_THETA])
@@ -58,7 +58,7 @@ def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
              aliases={"kp": ("kp1", "kp2"), "kd": ("kd1", "kd2")},
              state="xi", initial="reference-speed", needs_moving_reference=False,
              stiffness=lambda g, v_d, omega_d: max(g["kd1"], g["kd2"], math.sqrt(max(g["kp1"], g["kp2"]))))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def dynamic_feedback_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     kp1, kp2, kd1, kd2, xi_min = gains.kp1, gains.kp2, gains.kd1, gains.kd2, gains.xi_min
     r1 = ref[REF_DDX] + kp1 * (ref[REF_X] - x) + kd1 * (ref[REF_DX] - xi * cos_theta)

@@ -25,7 +25,7 @@ from __future__ import annotations
 from numba import njit
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def separation_bearing_law(separation, bearing, cos_phi, sin_phi, cos_gamma, sin_gamma, v_leader, omega_leader,
                            separation_d, bearing_d, separation_d_rate, bearing_d_rate, k1, k2, d):
     """(v_f, ω_f) of the l–φ follower (spec §2.2)."""
@@ -34,7 +34,7 @@ def separation_bearing_law(separation, bearing, cos_phi, sin_phi, cos_gamma, sin
     return w1 * cos_gamma - separation * w2 * sin_gamma, (w1 * sin_gamma + separation * w2 * cos_gamma) / d
 
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def separation_separation_law(separation_1, separation_2, cos_phi_1, cos_phi_2, cos_gamma_1, sin_gamma_1,
                               cos_gamma_2, sin_gamma_2, v_leader_1, v_leader_2, separation_1_d, separation_2_d,
                               separation_1_d_rate, separation_2_d_rate, k1, k2, d, sin_floor):

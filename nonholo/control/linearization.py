@@ -45,7 +45,7 @@ def _scheduled_gain(zeta, b, v_d, omega_d):
 @control_law("approximate-linearization", title="Approximate linearization",
              source="thesis §4.3 Eq 4.16-4.23; spec §3.1; De Luca, Oriolo & Vendittelli 2001",
              gains=GAINS, stiffness=scheduled_rate)
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """v = v_d cos e3 + k1 e1,  ω = ω_d + b v_d e2 + k3 e3  (k2 sign(v_d) = b v_d)."""
     zeta, b = gains.zeta, gains.b
@@ -59,7 +59,7 @@ def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, ga
 @control_law("nonlinear", title="Nonlinear (Samson-type) design",
              source="thesis §4.6 Eq 4.27-4.31; spec §3.2; Samson & Ait-Abderrahim 1991",
              gains=GAINS, stiffness=scheduled_rate)
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def nonlinear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """v = v_d cos e3 + k1 e1,  ω = ω_d + k4 v_d (sin e3 / e3) e2 + k3 e3,  k4 = b.
 

@@ -70,7 +70,7 @@ def excitation(e2, t, k6):
                     "k5": Gain(1.0, POSITIVE), "k6": Gain(50.0, POSITIVE)},
              state="xi", initial=0.0, xi_is_speed=False,
              stiffness=lambda g, v, w: max(g["k1"], g["k3"], g["k5"]))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.1. ξ is x_d, the moving point on the goal's x-axis (x_d(0) = 0)."""
     k1, k2, k3, k5, k6 = gains.k1, gains.k2, gains.k3, gains.k5, gains.k6
@@ -90,7 +90,7 @@ def time_varying_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
              gains={"k1": Gain(1.0, POSITIVE), "k2": Gain(3.0, POSITIVE), "k3": Gain(2.0, POSITIVE),
                     "tolerance": Gain(1e-9, POSITIVE)},
              stiffness=lambda g, v, w: max(g["k1"], g["k2"]))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def polar_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.2 (Aicardi et al.), angles wrapped to (−π, π]; stop below the tolerance."""
     gx, gy, gtheta = goal_frame_pose(x, y, theta, gains)
@@ -117,7 +117,7 @@ def polar_command(psi, gx, gy, gtheta, gains):
                     "kd2": Gain(7.0, POSITIVE), "xi_min": Gain(1e-9, POSITIVE), "xi0": Gain(0.1, NONZERO_KICK)},
              state="xi", initial="gain:xi0", heading_controlled=False,
              stiffness=lambda g, v, w: max(g["kd1"], g["kd2"]))
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def dynamic_feedback_posture_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """Spec §5.3: PD on the goal-frame position through the compensator ξ = v."""
     kp1, kd1, kp2, kd2, xi_min = gains.kp1, gains.kd1, gains.kp2, gains.kd2, gains.xi_min

@@ -32,9 +32,9 @@ follower-posture.md §4: parents first, their *computed* commands). Sampled-data
 (``hold_every`` > 0, spec fleet.md §2) evaluates every law once per control instant, parents
 first, and integrates each robot with its command held.
 
-Inside the loops over the batch only inline functions of scalars and tuples are called: an
-inlined function that writes through an array argument reference-counts it on every
-iteration, which stops vectorization. The kernel mutates ``state``, ``branch``, ``stats``,
+Inside the loops over the batch only functions of scalars and tuples are called (the kernel's
+own helpers inlined by numba, the laws inlined by LLVM): a called function that writes through
+an array argument reference-counts it on every iteration, which stops vectorization. The kernel mutates ``state``, ``branch``, ``stats``,
 ``pair_stats``, ``record``, ``held`` and ``step_rate``, and can be resumed (``k_start``,
 ``k_stop``) so that callers can show progress. One kernel is compiled per pair of root laws
 and per "has followers" (``make_kernel``) and cached on disk by numba.
@@ -62,6 +62,12 @@ from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
 # comparisons per loop, not per robot); the options are process-wide.
 llvmlite.binding.set_option("nonholo", "-runtime-memory-check-threshold=256")
 llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
+# Laws are compiled once each, as functions of their own (numba-level inlining re-typed and
+# re-lowered a law at each of its ten call sites: a minute per kernel on a fresh install);
+# LLVM inlines them into the kernel's loops instead, which vectorization needs. Its default
+# threshold (a few hundred instructions) would leave a long law as a call inside the loop
+# over the batch: raise it.
+llvmlite.binding.set_option("nonholo", "-inline-threshold=100000")
 
 ROOT_A, ROOT_B, SEPARATION_BEARING, SEPARATION_SEPARATION = range(4)
 MAX_FIELDS = 10

@@ -490,10 +490,18 @@ def _integrate_chunks(integrate, args, n_steps, work, name, count, progress, out
             bar.update(int(k_stop - k_start))
 
 
+# A robot whose error or speed passed this (m, m/s) diverged, as one whose state became
+# non-finite: an unstable run grows without bound, and whether it overflows to inf within
+# the horizon depends on rounding (1e149 m and still finite is not a result).
+DIVERGED_BEYOND = 1e9
+
+
 def diverged(stats: np.ndarray) -> np.ndarray:
-    """(robots, members) booleans: the robots whose state became non-finite, from the
-    statistics (STAT_COUNT, robots, members) of a run."""
-    return ~np.isfinite(stats[[kn.E_MEAN, kn.E_M2, kn.V_SQ, kn.W_SQ]]).all(axis=0)
+    """(robots, members) booleans: the robots whose state became non-finite or whose error
+    or speed passed ``DIVERGED_BEYOND``, from the statistics (STAT_COUNT, robots, members)
+    of a run."""
+    finite = np.isfinite(stats[[kn.E_MEAN, kn.E_M2, kn.V_SQ, kn.W_SQ]]).all(axis=0)
+    return ~finite | (np.abs(stats[[kn.E_MAX, kn.V_PEAK]]) > DIVERGED_BEYOND).any(axis=0)
 
 
 def _check_diverged(group: Group, stats: np.ndarray) -> None:
@@ -502,7 +510,7 @@ def _check_diverged(group: Group, stats: np.ndarray) -> None:
         names = [robot.name for robot, ok in zip(group.robots, finite) if not ok]
         shown = ", ".join(repr(name) for name in names[:5]) + (" …" if len(names) > 5 else "")
         raise SimulationError(
-            f"the simulation of robot(s) {shown} diverged (non-finite state): reduce dt, set more substeps or "
+            f"the simulation of robot(s) {shown} diverged (state non-finite or beyond 1e9 m): reduce dt, set more substeps or "
             "check the gains, actuator limits and the formation's geometry")
 
 

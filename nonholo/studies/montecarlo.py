@@ -19,7 +19,7 @@ robot's result never depends on the formations it is simulated with), ``chunk_bo
 samples per batch; chunk boundaries depend only on the study, so results are the same in
 this process and on a Dask cluster (``nonholo.studies.distributed``).
 
-**Failures** per sample (any of its simulated robots): *diverged* (non-finite state, the
+**Failures** per sample (any of its simulated robots): *diverged* (state non-finite or beyond 1e9 m, the
 simulator's ``diverged``); *singular* (a singularity guard acted at some sample);
 *saturated* (a robot's command clipped on more than ``saturation_share`` of the samples);
 *collision* (two robots of a formation closer than 2d, d its largest castor offset).

@@ -90,7 +90,7 @@ SPEC_REFERENCE: dict[str, dict[str, SpecValue]] = {
 
 # ------------------------------------------------------------------ the implementation error of spec §5.2 (b)
 
-@njit(inline="always", error_model="numpy")
+@njit(error_model="numpy", fastmath=False)
 def polar_world_distance_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """The polar law with ψ measured from the *world* origin while φ, μ are goal-relative:
     spec §5.2 (b), a plausible reconstruction of the thesis's §5.8 failure (not a real law)."""
