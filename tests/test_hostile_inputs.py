@@ -283,6 +283,24 @@ def test_a_grid_past_the_last_waypoint_is_one_clear_line():
     assert "add a waypoint at t >= 10 s" in message
 
 
+def test_a_run_longer_than_the_waypoints_names_the_duration_and_the_point_its_field(tmp_path):
+    text = """name = "w"
+[simulation]
+duration = 100
+[reference]
+kind = "waypoints"
+points = [[0, 0, 0], [1, 1, 1], [2, 0, 2]]
+[[robots]]
+name = "a"
+"""
+    message = refused(lambda: nonholo.parse_scenario(text), ScenarioError)
+    assert message.endswith("simulation.duration: the run covers t = 0 to 100 s but the waypoints reference covers "
+                            "t = 0 to 2 s: extend the reference or shorten the run")
+    message = refused(lambda: nonholo.parse_scenario(text.replace("[2, 0, 2]", "[1, 0, 2]")), ScenarioError)
+    assert message.endswith("reference.points[2]: time 1 s is not after the previous waypoint's 1 s: waypoint "
+                            "times must be strictly increasing")
+
+
 # ---------------------------------------------------------------- TOML files
 
 SCENARIO = """

@@ -77,7 +77,6 @@ are numbers in radians or expressions of pi)::
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 from nonholo import references
@@ -177,6 +176,8 @@ class _Reader:
             if kind == "waypoints":
                 return references.waypoints(params["points"], params.get("boundary", "not-a-knot"), direction)
             return references.THESIS_TESTS[kind](direction=direction, **params)
+        except ScenarioError as exc:   # the reference names its own field: point to it in the file
+            self.fail(f"reference.{exc.field}" if exc.field else "reference", exc.problem)
         except NonholoInputError as exc:
             self.fail("reference", str(exc))
         except ValueError as exc:

@@ -259,6 +259,13 @@ class Scenario:
         if self.duration / self.dt > MAX_STEPS:
             raise FormationError(None, "dt", f"dt = {self.dt:g} s gives {self.duration / self.dt:.3g} steps over "
                                              f"{self.duration:g} s (at most {MAX_STEPS:g}): use a larger dt")
+        span = getattr(self.reference, "time_span", None)   # references defined on a bounded time span
+        if span is not None:
+            end, slack = self.duration, 1e-9 * max(1.0, abs(span[0]), abs(span[1]))
+            if span[0] > slack or end > span[1] + slack:
+                raise FormationError(None, "duration", f"the run covers t = 0 to {end:g} s but the {self.reference.kind} "
+                                                       f"reference covers t = {span[0]:g} to {span[1]:g} s: extend the "
+                                                       "reference or shorten the run")
         if self.control_period is not None:
             if not (is_real(self.control_period) and 0 < self.control_period <= self.duration):
                 raise FormationError(None, "control_period", "control_period must be a positive number of seconds up "
