@@ -143,8 +143,9 @@
       const r = now.robots[row.dataset.robot];
       if (!r) continue;
       row.cells[1].textContent = fmt(r.x, 2); row.cells[2].textContent = fmt(r.y, 2);
-      row.cells[3].textContent = fmt(r.theta, 2); row.cells[4].textContent = fmt(r.v, 2);
-      row.cells[5].textContent = r.state || "";
+      const wrapped = r.theta - 2 * Math.PI * Math.ceil((r.theta - Math.PI) / (2 * Math.PI));
+      row.cells[3].textContent = fmt(wrapped, 2); row.cells[4].textContent = fmt(r.v, 2);
+      row.cells[5].textContent = r.state || "–";
     }
   }
 
@@ -205,7 +206,8 @@
     ctx.lineTo(-size * 0.7, -size * 0.6); ctx.closePath();
     ctx.fillStyle = fill; ctx.fill(); ctx.strokeStyle = "#222"; ctx.lineWidth = 1; ctx.stroke();
     ctx.restore();
-    ctx.fillStyle = "#222"; ctx.font = "12px sans-serif"; ctx.fillText(name, sx + 10, sy - 10);
+    ctx.font = "12px sans-serif"; ctx.lineWidth = 3; ctx.strokeStyle = "rgba(255,255,255,0.85)";
+    ctx.strokeText(name, sx + 10, sy - 10); ctx.fillStyle = "#222"; ctx.fillText(name, sx + 10, sy - 10);
   }
 
   function draw(now) {
@@ -237,7 +239,8 @@
       ctx.beginPath(); ctx.strokeStyle = "#555"; ctx.lineWidth = 1; ctx.setLineDash([3, 3]);
       ctx.moveTo(ax, ay); ctx.lineTo(bx, by); ctx.stroke(); ctx.setLineDash([]);
       const child = page.robots.find((r) => r.name === link.child);
-      if (child && values.e1 !== null && values.e1 !== undefined) {
+      const long = Math.hypot(bx - ax, by - ay) > 150;   // short links: the panel has their numbers
+      if (long && child && values.e1 !== null && values.e1 !== undefined) {
         ctx.fillStyle = "#555"; ctx.font = "10px sans-serif";
         ctx.fillText(linkErrors(link, child, values).map(([n, v]) => `Δ${label(n)} ${fmt(v, 2)}`).join(" "),
                      (ax + bx) / 2 + 4, (ay + by) / 2 + 12);
@@ -248,7 +251,8 @@
       if (p) robotShape(p.x, p.y, p.theta, color(i), r.name);
     });
     // scale bar
-    const v = state.view, meters = Math.pow(10, Math.floor(Math.log10(120 / v.scale)));
+    const v = state.view, decade = Math.pow(10, Math.floor(Math.log10(150 / v.scale)));
+    const meters = [5, 2, 1].map((m) => m * decade).find((m) => m * v.scale <= 150) || decade;
     ctx.fillStyle = "#222"; ctx.fillRect(canvas.width - 20 - meters * v.scale, canvas.height - 18, meters * v.scale, 3);
     ctx.font = "11px sans-serif"; ctx.fillText(meters + " m", canvas.width - 20 - meters * v.scale, canvas.height - 22);
   }
