@@ -107,3 +107,32 @@ def test_bad_recordings_are_one_line(tmp_path, triangle, content):
     assert "\n" not in str(info.value) and str(bad) in str(info.value)
     with pytest.raises(NonholoInputError, match="no such file"):
         read_recording(tmp_path / "missing.mcap")
+
+
+def test_out_directory_replays_the_run(triangle, tmp_path):
+    from nonholo.view.data import from_outdir
+
+    summary = triangle.to_dict()
+    write_csv_only = tmp_path / "out"
+    write_csv_only.mkdir()
+    (write_csv_only / "result.json").write_text(json.dumps(summary))
+    triangle.write_csv(write_csv_only / "trajectories.csv")
+    back = from_outdir(write_csv_only)
+    assert back.names == list(triangle.names) and back.reference is None
+    assert np.abs(back.t - triangle.t).max() < 1e-9
+    for i in range(len(triangle.names)):
+        assert np.abs(back.pose[:, i, 0] - triangle.x[i]).max() < 1e-8 * max(1.0, np.abs(triangle.x[i]).max())
+        scale = max(1.0, np.abs(triangle.omega[i]).max())
+        assert np.abs(back.command[:, i, 1] - triangle.omega[i]).max() < 1e-8 * scale
+    e1, e2 = triangle.output_errors("F")
+    assert np.abs(back.errors[:, 2, 1] - e2).max() < 1e-8 * max(1.0, np.abs(e2).max())   # 9 digits in the CSV
+    assert back.robots[2]["outputs"] == ["l1", "l2"] and back.robots[2]["parents"] == ["leader", "R2"]
+    assert back.page()["links"].keys() == {"leader->R2", "leader->F", "R2->F"}
+    # damaged directories: one line each
+    (write_csv_only / "trajectories.csv").write_text("t_s,robot\n0,leader\n")
+    with pytest.raises(NonholoInputError, match="no column x_m"):
+        from_outdir(write_csv_only)
+    triangle.write_csv(write_csv_only / "trajectories.csv")
+    (write_csv_only / "result.json").write_text("{")
+    with pytest.raises(NonholoInputError, match="not a nonholo result"):
+        from_outdir(write_csv_only)
