@@ -46,6 +46,9 @@
     page.robots.forEach((r) => follow.add(new Option(r.name, r.name)));
     follow.value = state.follow;
     $("slider").disabled = page.mode !== "replay";
+    $("lost-head").textContent = page.mode === "live" ? "in flight" : "lost";
+    $("lost-head").title = page.mode === "live" ? "frames sent and not yet received (in flight, or lost)" :
+      "frames sent and never received";
     $("slider").max = page.mode === "replay" ? String(page.t.length - 1) : "0";
     $("play").textContent = state.playing ? "pause" : "play";
     state.view = null;
