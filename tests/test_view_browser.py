@@ -1,6 +1,7 @@
 """The page in a real browser (Debian's chromium driven by Playwright): a replay and a running
 fleet load, robots move, the link panel shows numbers, a wrong token is refused; screenshots are
 saved for a person to look at (NONHOLO_VIEW_SCREENSHOTS=DIR keeps them there)."""
+import json
 import os
 import re
 import shutil
@@ -168,11 +169,15 @@ def test_fleet_view_command(page, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
-        line = _read_line(process, time.monotonic() + 60)
+        line = _read_line(process.stderr, time.monotonic() + 60)
         url = re.fullmatch(r"page: (http://127\.0\.0\.1:\d+/\?token=[\w-]+)\n", line).group(1)
         assert page.goto(url).status == 200
         page.wait_for_function("() => Object.keys(window.nonholoView.robots).length === 8", timeout=30_000)
         assert page.goto(url.split("=")[0] + "=wrong").status == 403
+        # stdout holds exactly the run's JSON, flushed before the page lingers (--for)
+        summary = json.loads(_read_line(process.stdout, time.monotonic() + 30))
+        assert set(summary["robots"]) == {"leader"} | {f"f{i}" for i in range(1, 8)}
+        assert all(link["lost"] == 0 for link in summary["network"]["links"].values())
     finally:
         process.terminate()
         try:
@@ -184,12 +189,12 @@ def test_fleet_view_command(page, tmp_path):
         process.stderr.close()
 
 
-def _read_line(process, deadline: float) -> str:
-    """The first line of the child's stdout, waiting at most until ``deadline``."""
+def _read_line(stream, deadline: float) -> str:
+    """The next line of a child's output stream, waiting at most until ``deadline``."""
     got = {}
-    reader = threading.Thread(target=lambda: got.setdefault("line", process.stdout.readline()), daemon=True)
+    reader = threading.Thread(target=lambda: got.setdefault("line", stream.readline()), daemon=True)
     reader.start()
     reader.join(max(0.0, deadline - time.monotonic()))
     if "line" not in got:
-        raise AssertionError("nonholo fleet --view printed no address in time")
+        raise AssertionError("nonholo fleet --view printed nothing in time")
     return got["line"]

@@ -82,5 +82,6 @@ def handle(args: argparse.Namespace) -> int:
         network = summary["network"]
         print(f"network: {network['transport']} {network['mode']}, {network['control_steps']} control steps, "
               f"{network['control_steps_per_s']:.0f} steps/s")
+    sys.stdout.flush()
     viewing.serve()
     return EXIT_OK

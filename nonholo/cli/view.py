@@ -47,9 +47,9 @@ def check_server_arguments(args: argparse.Namespace) -> None:
         raise NonholoInputError(f"--for must be a positive number of seconds, got {args.serve_for}")
 
 
-def start_server(page, feed, args: argparse.Namespace, prog: str):
-    """Start the page server and print its address (stdout); OSError with a one-line
-    message when it cannot serve there."""
+def start_server(page, feed, args: argparse.Namespace, prog: str, stream=None):
+    """Start the page server and print its address (on ``stream``, default stdout); OSError
+    with a one-line message when it cannot serve there."""
     from nonholo.view.server import ViewServer
 
     try:
@@ -59,12 +59,12 @@ def start_server(page, feed, args: argparse.Namespace, prog: str):
     if not ipaddress.ip_address(args.host).is_loopback:
         print(f"{prog}: serving beyond loopback on {args.host}: anyone who has the address can watch",
               file=sys.stderr)
-    print(f"page: {server.url}", flush=True)
+    print(f"page: {server.url}", file=stream or sys.stdout, flush=True)
     return server
 
 
 def serve_until_stopped(server, seconds: float | None) -> None:
-    """Block until Ctrl-C or ``seconds``; the server is stopped either way."""
+    """Block until Ctrl-C or ``seconds``; ``server.stop()`` is called either way."""
     deadline = None if seconds is None else time.monotonic() + seconds
     try:
         while deadline is None or time.monotonic() < deadline:
@@ -115,9 +115,13 @@ def add_fleet_view_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="FILE.mcap", help="write an MCAP recording of the run (see nonholo run)")
     parser.add_argument("--view", action="store_true",
                         help="serve a live page of the fleet while it runs (its address, with a token, is printed "
-                             "at start); after the run the page replays it until Ctrl-C or --for S")
+                             "on stderr at start); after the run the page replays it until Ctrl-C or --for S")
+    parser.add_argument("--foxglove", type=int, nargs="?", const=8765, metavar="PORT",
+                        help="also serve the fleet live to Foxglove on ws://127.0.0.1:PORT (default 8765; "
+                             "loopback only: that protocol has no token); needs nonholo[foxglove]")
     parser.add_argument("--speed", type=float, metavar="X",
-                        help="pace logical time at X times wall time (default: 1 with --view, else unpaced)")
+                        help="pace logical time at X times wall time (default: 1 with --view or --foxglove, "
+                             "else unpaced)")
     add_server_arguments(parser)
 
 
@@ -129,8 +133,9 @@ class FleetViewing:
 
     def __init__(self, args: argparse.Namespace, prog: str) -> None:
         self.args, self.prog = args, prog
-        self.observer = self.server = None
-        self.speed = args.speed if args.speed is not None else (1.0 if args.view else None)
+        self.observer = self.server = self.bridge = None
+        watched = args.view or args.foxglove is not None
+        self.speed = args.speed if args.speed is not None else (1.0 if watched else None)
 
     def start(self) -> None:
         from nonholo.errors import NonholoInputError
@@ -141,22 +146,30 @@ class FleetViewing:
             raise NonholoInputError(f"--speed must be a positive number, got {args.speed}")
         if args.record:
             require("mcap")
-        if not args.view:
+        if not args.view and args.foxglove is None:
             return
+        from nonholo.errors import SimulationError
         from nonholo.view.feed import FleetObserver, LatestFeed
 
         check_server_arguments(args)
-        require("aiohttp")
-        from nonholo.errors import SimulationError
-
+        if args.foxglove is not None and not 0 <= args.foxglove <= MAX_PORT:
+            raise NonholoInputError(f"--foxglove must be a port 0..{MAX_PORT}, got {args.foxglove}")
+        require("aiohttp") if args.view else require("foxglove", "foxglove")
         self.observer = FleetObserver(LatestFeed())
         try:
-            self.server = start_server(None, self.observer.feed, args, self.prog)
-        except OSError as exc:
-            raise SimulationError(str(exc)) from None
+            if args.view:
+                self.server = start_server(None, self.observer.feed, args, self.prog, sys.stderr)
+            if args.foxglove is not None:
+                from nonholo.view.foxglove_live import FoxgloveBridge
+
+                self.bridge = FoxgloveBridge(self.observer.feed, args.foxglove).start()
+                print(f"foxglove: ws://127.0.0.1:{self.bridge.port}", file=sys.stderr, flush=True)
+        except (OSError, RuntimeError) as exc:    # foxglove reports a busy port as RuntimeError
+            self.stop()
+            raise SimulationError(f"cannot serve: {' '.join(str(exc).split())[:160]}") from None
 
     def finish(self, run, summary: dict) -> None:
-        if not (self.args.record or self.server):
+        if not (self.args.record or self.observer):
             return
         from nonholo.view.data import from_result
 
@@ -168,14 +181,16 @@ class FleetViewing:
 
             write_recording(replay, self.args.record, network=summary.get("network"))
             print(f"wrote {self.args.record}", file=sys.stderr)
-        if self.server is not None:
+        if self.observer is not None:
             self.observer.feed.finish(replay.page())
 
     def serve(self) -> None:
-        if self.server is not None:
-            print("the run is over; the page replays it (Ctrl-C stops)", file=sys.stderr)
-            serve_until_stopped(self.server, self.args.serve_for)
+        if self.server is not None or self.bridge is not None:
+            what = "the page replays it" if self.server is not None else "Foxglove keeps its last state"
+            print(f"the run is over; {what} (Ctrl-C stops)", file=sys.stderr)
+            serve_until_stopped(self, self.args.serve_for)
 
     def stop(self) -> None:
-        if self.server is not None:
-            self.server.stop()
+        for part in (self.server, self.bridge):
+            if part is not None:
+                part.stop()

@@ -51,8 +51,8 @@ class Replay:
         if keep[-1] != self.t.size - 1:
             keep = np.append(keep, self.t.size - 1)
 
-        def column(values):
-            return [round(float(v), 6) for v in values]
+        def column(values):   # JSON has no NaN: a diverged sample is null (the page skips it)
+            return [round(v, 6) if math.isfinite(v) else None for v in np.asarray(values, dtype=float).tolist()]
 
         robots = []
         for i, robot in enumerate(self.robots):

@@ -100,6 +100,17 @@ def _pose(x: float, y: float, theta: float) -> dict:
     return {"position": {"x": x, "y": y, "z": 0.0}, "orientation": _quaternion(theta)}
 
 
+def pose_in_frame(ns: int, x: float, y: float, theta: float) -> dict:
+    """A ``foxglove.PoseInFrame`` message in the ``world`` frame."""
+    return {"timestamp": _stamp(ns), "frame_id": FRAME, "pose": _pose(x, y, theta)}
+
+
+def frame_transform(ns: int, name: str, x: float, y: float, theta: float) -> dict:
+    """A ``foxglove.FrameTransform`` message: frame ``name`` in ``world``."""
+    return {"timestamp": _stamp(ns), "parent_frame_id": FRAME, "child_frame_id": name,
+            "translation": {"x": x, "y": y, "z": 0.0}, "rotation": _quaternion(theta)}
+
+
 def _line(points, color, thickness: float, kind: int = 0) -> dict:
     r, g, b = color
     return {"type": kind, "pose": _pose(0.0, 0.0, 0.0), "thickness": thickness, "scale_invariant": True,
@@ -173,17 +184,15 @@ def write_recording(replay: Replay, path, network: dict | None = None) -> Path:
             for i, name in enumerate(names):
                 x, y, theta = (float(v) for v in replay.pose[k, i])
                 pose_channel, command_channel, errors_channel = per_robot[i]
-                put(pose_channel, ns, {"timestamp": stamp, "frame_id": FRAME, "pose": _pose(x, y, theta)})
-                put(tf, ns, {"timestamp": stamp, "parent_frame_id": FRAME, "child_frame_id": name,
-                             "translation": {"x": x, "y": y, "z": 0.0}, "rotation": _quaternion(theta)})
+                put(pose_channel, ns, pose_in_frame(ns, x, y, theta))
+                put(tf, ns, frame_transform(ns, name, x, y, theta))
                 put(command_channel, ns, {"timestamp": stamp, "v": float(replay.command[k, i, 0]),
                                           "omega": float(replay.command[k, i, 1])})
                 first, second = replay.robots[i]["outputs"]
                 put(errors_channel, ns, {"timestamp": stamp, f"{first}_error": float(replay.errors[k, i, 0]),
                                          f"{second}_error": float(replay.errors[k, i, 1])})
             if reference_channel is not None:
-                put(reference_channel, ns, {"timestamp": stamp, "frame_id": FRAME,
-                                            "pose": _pose(*(float(v) for v in replay.reference[k]))})
+                put(reference_channel, ns, pose_in_frame(ns, *(float(v) for v in replay.reference[k])))
             if pairs:
                 put(links_channel, ns, {"timestamp": stamp, "links": {
                     key: {"distance": float(np.hypot(*(replay.pose[k, c, :2] - replay.pose[k, p, :2]))),

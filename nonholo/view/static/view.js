@@ -37,22 +37,39 @@
   }
   function fail(message) { $("status").textContent = message; }
 
-  function start(page) {
-    state.page = page; state.mode = page.mode; state.frame = 0; state.trails = {};
+  // A live page opened before the fleet started has no robots yet: fetch them again (bounded).
+  async function refreshSetup() {
+    if (state.refreshing || state.refreshes >= 20) return;
+    state.refreshing = true; state.refreshes = (state.refreshes || 0) + 1;
+    try {
+      const response = await fetch(q("/data"), { cache: "no-store" });
+      if (response.ok) {
+        const page = await response.json();
+        if (page.mode === "live" && page.robots.length) show(page);
+      }
+    } finally { state.refreshing = false; }
+  }
+
+  function show(page) {
+    state.page = page; state.mode = page.mode; state.view = null;
     $("title").textContent = page.title || "nonholo";
-    $("mode").textContent = page.mode; $("mode").className = "badge " + page.mode;
     const follow = $("follow");
     while (follow.options.length > 1) follow.remove(1);
     page.robots.forEach((r) => follow.add(new Option(r.name, r.name)));
     follow.value = state.follow;
+    buildTables();
+  }
+
+  function start(page) {
+    state.frame = 0; state.trails = {}; state.clock = undefined;
+    show(page);
+    $("mode").textContent = page.mode; $("mode").className = "badge " + page.mode;
     $("slider").disabled = page.mode !== "replay";
     $("lost-head").textContent = page.mode === "live" ? "in flight" : "lost";
     $("lost-head").title = page.mode === "live" ? "frames sent and not yet received (in flight, or lost)" :
       "frames sent and never received";
     $("slider").max = page.mode === "replay" ? String(page.t.length - 1) : "0";
     $("play").textContent = state.playing ? "pause" : "play";
-    state.view = null;
-    buildTables();
     if (page.mode === "live") connect();
     document.body.dataset.mode = page.mode;
   }
@@ -63,6 +80,7 @@
     ws.onmessage = (event) => {
       const snap = JSON.parse(event.data);
       state.reconnects = 0;
+      if (!state.page.robots.length && Object.keys(snap.robots).length) refreshSetup();
       if (state.playing || !state.live) {
         state.live = snap;
         for (const [name, r] of Object.entries(snap.robots)) {
@@ -179,9 +197,12 @@
   }
   function polyline(xs, ys, from, to, stroke, width, dash) {
     ctx.beginPath(); ctx.strokeStyle = stroke; ctx.lineWidth = width; ctx.setLineDash(dash || []);
+    let pen = false;
     for (let i = from; i < to; i++) {
+      if (xs[i] === null || ys[i] === null) { pen = false; continue; }   // a diverged sample
       const [sx, sy] = toScreen(xs[i], ys[i]);
-      if (i === from) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
+      if (pen) ctx.lineTo(sx, sy); else ctx.moveTo(sx, sy);
+      pen = true;
     }
     ctx.stroke(); ctx.setLineDash([]);
   }
@@ -251,7 +272,7 @@
     }
     page.robots.forEach((r, i) => {
       const p = now.robots[r.name];
-      if (p) robotShape(p.x, p.y, p.theta, color(i), r.name);
+      if (p && p.x !== null && p.y !== null) robotShape(p.x, p.y, p.theta, color(i), r.name);
     });
     // scale bar
     const v = state.view, decade = Math.pow(10, Math.floor(Math.log10(150 / v.scale)));
