@@ -141,6 +141,27 @@ def test_fleet_snapshots_keep_up_and_match_the_result(tmp_path):
     assert any(abs(link["e1"]) > 0.1 for _, s in snapshots for link in s["links"].values() if link["e1"] is not None)
 
 
+def test_final_snapshot_of_an_l_l_follower(tmp_path):
+    """The page's errors of an l-l follower (F keeps l1 to the leader, l2 to R2) are the run's."""
+    import dataclasses
+
+    from nonholo import examples
+    from nonholo.sim.files import load_scenario
+
+    scenario = load_scenario(examples.resolve("formation-eight-triangle"))
+    scenario = dataclasses.replace(scenario, duration=1.0, dt=0.01, control_period=0.02, steps=None)
+    feed = LatestFeed()
+    run = run_fleet(scenario, observer=FleetObserver(feed))
+    last = json.loads(feed.latest()[1])
+    l1, l2 = run.result.output_errors("F")
+    assert abs(l1[-1]) > 1e-3 and abs(l2[-1]) > 1e-3
+    assert last["links"]["leader->F"]["e1"] == pytest.approx(l1[-1], abs=2e-6)
+    assert last["links"]["R2->F"]["e2"] == pytest.approx(l2[-1], abs=2e-6)
+    e_l, e_phi = run.result.output_errors("R2")
+    assert last["links"]["leader->R2"]["e1"] == pytest.approx(e_l[-1], abs=2e-6)
+    assert last["links"]["leader->R2"]["e2"] == pytest.approx(np.angle(np.exp(1j * e_phi[-1])), abs=2e-6)
+
+
 @pytest.mark.parametrize("make, message", [
     (lambda d: d / "missing.mcap", "no such file or directory"),
     (lambda d: (d / "bad.mcap").write_bytes(b"\x89MCAP0\r\n garbage") and d / "bad.mcap", "not a readable MCAP"),

@@ -13,6 +13,7 @@ import threading
 import time
 
 from nonholo.models.formation_geometry import separation_bearing, wrap
+from nonholo.sim.kernel import OFFSET_D
 
 OBSERVE_PERIOD_S = 0.05    # the launcher samples the fleet at 20 Hz (wall time)
 
@@ -128,7 +129,7 @@ def fleet_snapshot(programs, started: float) -> dict:
             continue
         errors = (None, None)
         if k >= 0:
-            d = float(s.fields[2])
+            d = float(s.fields[OFFSET_D])
             follower = (x, y, theta)
             parents = [by_name[p] for p in s.parents]
             target = s.targets[k]
