@@ -23,6 +23,7 @@ from nonholo.fleet.launch import run_fleet  # noqa: E402
 from nonholo.sim.simulator import simulate  # noqa: E402
 from nonholo.view.data import from_result  # noqa: E402
 from nonholo.view.feed import FleetObserver, LatestFeed  # noqa: E402
+from nonholo.view.record import read_recording  # noqa: E402
 from nonholo.view.server import ViewServer  # noqa: E402
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -178,6 +179,10 @@ def test_fleet_view_command(page, tmp_path):
         summary = json.loads(_read_line(process.stdout, time.monotonic() + 30))
         assert set(summary["robots"]) == {"leader"} | {f"f{i}" for i in range(1, 8)}
         assert all(link["lost"] == 0 for link in summary["network"]["links"].values())
+        recorded = read_recording(tmp_path / "fleet.mcap")      # written before the JSON
+        assert recorded.summary["network"]["links"] == summary["network"]["links"]
+        assert recorded.links["f6->f7"]["received"] == summary["network"]["links"]["f6->f7"]["received"] > 0
+        assert recorded.t[-1] == pytest.approx(4.0)
     finally:
         process.terminate()
         try:
