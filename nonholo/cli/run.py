@@ -29,7 +29,8 @@ def register(subparsers) -> None:
                                                            "when ffmpeg is installed")
     parser.add_argument("--record", metavar="FILE.mcap",
                         help="write an MCAP recording (poses, commands, reference, formation errors, links) that "
-                             "Foxglove opens and `nonholo view` replays; --every N keeps every N-th sample")
+                             "Foxglove opens and `nonholo view` replays: at most 100 samples per simulated second, "
+                             "and every N-th with --every N")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=handle)
 
@@ -66,9 +67,9 @@ def handle(args: argparse.Namespace) -> int:
             print(f"wrote {args.animate}", file=sys.stderr)
         if args.record:
             from nonholo.view.data import from_result
-            from nonholo.view.record import write_recording
+            from nonholo.view.record import record_every, write_recording
 
-            write_recording(from_result(result, args.every, summary), args.record)
+            write_recording(from_result(result, record_every(result.scenario.dt, args.every), summary), args.record)
             print(f"wrote {args.record}", file=sys.stderr)
     except (OSError, ValueError) as exc:  # unwritable place, unknown image format
         print(f"nonholo run: cannot write the outputs: {exc}", file=sys.stderr)

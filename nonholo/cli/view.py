@@ -172,8 +172,10 @@ class FleetViewing:
         if not (self.args.record or self.observer):
             return
         from nonholo.view.data import from_result
+        from nonholo.view.record import record_every
 
-        replay = from_result(run.result, summary=summary)
+        # the page decimates to its own frame budget: one replay at the recording's stride serves both
+        replay = from_result(run.result, record_every(run.result.scenario.dt), summary)
         for key, link in (replay.links or {}).items():
             link.update(summary.get("network", {}).get("links", {}).get(key, {}))
         if self.args.record:

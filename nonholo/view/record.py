@@ -36,10 +36,11 @@ from nonholo.view.data import Replay
 PROFILE = ""  # no ROS profile: plain JSON messages
 METADATA = "nonholo"
 FRAME = "world"
-SCENE_RATE_HZ = 10.0      # scene updates (trails, links) at most this often
+SCENE_RATE_HZ = 5.0       # scene updates (trails, links) at most this often
 TRAIL_S = 20.0            # seconds of trail drawn behind each robot
-TRAIL_POINTS = 200        # at most this many points per trail
-MAX_MESSAGES = 50_000_000
+TRAIL_POINTS = 50         # at most this many points per trail
+MAX_MESSAGES = 5_000_000   # reading holds a few hundred bytes per message
+RECORD_MAX_HZ = 100.0      # samples recorded at most this often (Foxglove plays a run in real time)
 COLORS = ((0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17), (0.84, 0.15, 0.16), (0.58, 0.4, 0.74),
           (0.55, 0.34, 0.29), (0.89, 0.47, 0.76), (0.5, 0.5, 0.5), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81))
 
@@ -129,6 +130,12 @@ def _dump(value) -> bytes:
 
 
 # ---------------------------------------------------------------------- writing
+def record_every(dt: float, every: int = 1) -> int:
+    """The sample stride of a recording: every ``every``-th sample, and at most
+    ``RECORD_MAX_HZ`` samples a second of simulated time."""
+    return max(int(every), math.ceil(1.0 / (RECORD_MAX_HZ * dt) - 1e-9))
+
+
 def write_recording(replay: Replay, path, network: dict | None = None) -> Path:
     """Write ``replay`` to the MCAP file ``path`` (see the module's table of topics)."""
     require("mcap")
@@ -235,15 +242,16 @@ def read_recording(path) -> Replay:
             names = [r["name"] for r in robots]
             if not names or len(set(names)) != len(names):
                 raise ValueError("robots")
-            series: dict[str, list] = {}
+            fields = _fields(robots)
+            series: dict[str, list] = {topic: [] for topic in fields}
             count = 0
             for _, channel, message in reader.iter_messages(log_time_order=False):
                 count += 1
                 if count > MAX_MESSAGES:
                     raise NonholoInputError(f"{path}: more than {MAX_MESSAGES} messages")
-                topic = channel.topic
-                if topic.startswith("/robots/") or topic == "/reference/pose":
-                    series.setdefault(topic, []).append((message.log_time, json.loads(message.data)))
+                extract = fields.get(channel.topic)
+                if extract is not None:   # numbers only: a long recording stays small in memory
+                    series[channel.topic].append((message.log_time, extract(json.loads(message.data))))
     except NonholoInputError:
         raise
     except (McapError, OSError, EOFError, ValueError, KeyError, TypeError, struct.error, AttributeError,
@@ -261,35 +269,40 @@ def _theta(orientation: dict) -> float:
     return 2.0 * math.atan2(orientation["z"], orientation["w"])
 
 
+def _pose_numbers(m: dict) -> tuple:
+    p = m["pose"]
+    return float(p["position"]["x"]), float(p["position"]["y"]), _theta(p["orientation"])
+
+
+def _fields(robots: list) -> dict:
+    """Per topic read back, how to take its numbers from a message."""
+    fields = {"/reference/pose": _pose_numbers}
+    for robot in robots:
+        name, (first, second) = robot["name"], robot["outputs"]
+        fields[f"/robots/{name}/pose"] = _pose_numbers
+        fields[f"/robots/{name}/command"] = lambda m: (float(m["v"]), float(m["omega"]))
+        fields[f"/robots/{name}/errors"] = lambda m, a=f"{first}_error", b=f"{second}_error": (float(m[a]),
+                                                                                              float(m[b]))
+    return fields
+
+
 def _replay(robots: list, series: dict, meta: dict) -> Replay:
     names = [r["name"] for r in robots]
-    poses = [sorted(series.get(f"/robots/{n}/pose", []), key=lambda m: m[0]) for n in names]
-    stamps = [m[0] for m in poses[0]]
+    first = sorted(series[f"/robots/{names[0]}/pose"], key=lambda m: m[0])
+    stamps = [m[0] for m in first]
     if not stamps:
         raise ValueError(f"no /robots/{names[0]}/pose messages")
 
-    def aligned(topic: str) -> list:
-        messages = sorted(series.get(topic, []), key=lambda m: m[0])
+    def aligned(topic: str) -> np.ndarray:
+        messages = sorted(series[topic], key=lambda m: m[0])
         if [m[0] for m in messages] != stamps:
             raise ValueError(f"{topic} is not on the poses' time grid")
-        return [m[1] for m in messages]
+        return np.array([m[1] for m in messages], dtype=float)
 
-    pose = np.empty((len(stamps), len(names), 3))
-    command = np.empty((len(stamps), len(names), 2))
-    errors = np.empty((len(stamps), len(names), 2))
-    for i, (name, robot) in enumerate(zip(names, robots)):
-        for k, m in enumerate(aligned(f"/robots/{name}/pose")):
-            p = m["pose"]
-            pose[k, i] = p["position"]["x"], p["position"]["y"], _theta(p["orientation"])
-        for k, m in enumerate(aligned(f"/robots/{name}/command")):
-            command[k, i] = m["v"], m["omega"]
-        first, second = robot["outputs"]
-        for k, m in enumerate(aligned(f"/robots/{name}/errors")):
-            errors[k, i] = m[f"{first}_error"], m[f"{second}_error"]
-    reference = None
-    if "/reference/pose" in series:
-        reference = np.array([[m["pose"]["position"]["x"], m["pose"]["position"]["y"], _theta(m["pose"]["orientation"])]
-                              for m in aligned("/reference/pose")])
+    pose = np.stack([aligned(f"/robots/{n}/pose") for n in names], axis=1)
+    command = np.stack([aligned(f"/robots/{n}/command") for n in names], axis=1)
+    errors = np.stack([aligned(f"/robots/{n}/errors") for n in names], axis=1)
+    reference = aligned("/reference/pose") if series["/reference/pose"] else None
     summary = json.loads(meta.get("summary", "null"))
     network = json.loads(meta.get("network", "null"))
     if network and isinstance(summary, dict):
