@@ -85,9 +85,12 @@ class ViewServer:
         return self
 
     def stop(self) -> None:
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            loop.call_soon_threadsafe(self._stopping.set)
+        loop, thread, stopping = self._loop, self._thread, getattr(self, "_stopping", None)
+        if loop is not None and thread is not None and thread.is_alive() and stopping is not None:
+            try:
+                loop.call_soon_threadsafe(stopping.set)
+            except RuntimeError:   # the loop has just closed
+                return
             thread.join(STOP_TIMEOUT_S)
 
     def __enter__(self) -> "ViewServer":
