@@ -182,3 +182,32 @@ def test_view_bad_options(tmp_path, capsys):
         assert main(["view", str(tmp_path / "x.mcap"), *options]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "nonholo view: --" in err
+
+
+def test_view_command_serves_a_recording(tmp_path, capsys):
+    """`nonholo view FILE.mcap` prints the page's address and serves the recording there."""
+    from nonholo.sim.simulator import simulate
+    from nonholo.view.data import from_result
+    from nonholo.view.record import write_recording
+
+    _, scenario = chain(tmp_path, duration=1.0)
+    result = simulate(scenario, progress=False)
+    path = write_recording(from_result(result), tmp_path / "run.mcap")
+    outcome = {}
+    runner = threading.Thread(target=lambda: outcome.setdefault("code", main(["view", str(path), "--for", "2"])))
+    runner.start()
+    try:
+        deadline, out = time.monotonic() + WAIT_S, ""
+        while "page: " not in out and time.monotonic() < deadline:
+            time.sleep(0.05)
+            out += capsys.readouterr().out
+        url = out.split("page: ", 1)[1].split()[0]
+        status, body = get(url.replace("/?", "/data?"))
+        page = json.loads(body)
+        assert status == 200 and page["mode"] == "replay" and page["title"] == "leader-and-7"
+        assert [r["name"] for r in page["robots"]] == list(result.names)
+        assert page["robots"][3]["x"][-1] == pytest.approx(result.x[3][-1], abs=1e-6)
+        assert get(url.split("?")[0] + "data")[0] == 403
+    finally:
+        runner.join(WAIT_S)
+    assert outcome["code"] == 0
