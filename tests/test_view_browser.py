@@ -165,7 +165,7 @@ def test_wrong_token_is_refused(page):
 def test_fleet_view_command(page, tmp_path):
     """`nonholo fleet --view` prints the page's address; the page shows the running fleet."""
     path, _ = chain(tmp_path, duration=4.0)
-    command = [sys.executable, "-m", "nonholo", "fleet", str(path), "--view", "--speed", "2", "--for", "20",
+    command = [sys.executable, "-m", "nonholo", "fleet", str(path), "--view", "--speed", "4", "--for", "20",
                "--json", "--record", str(tmp_path / "fleet.mcap")]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
