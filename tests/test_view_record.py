@@ -136,3 +136,13 @@ def test_out_directory_replays_the_run(triangle, tmp_path):
     (write_csv_only / "result.json").write_text("{")
     with pytest.raises(NonholoInputError, match="not a nonholo result"):
         from_outdir(write_csv_only)
+
+
+def test_too_large_a_recording_is_refused_before_writing(triangle, tmp_path, monkeypatch):
+    from nonholo.view import record
+
+    monkeypatch.setattr(record, "MAX_MESSAGES", 1000)
+    with pytest.raises(ValueError, match="more than 1000"):
+        write_recording(from_result(triangle), tmp_path / "big.mcap")
+    assert not (tmp_path / "big.mcap").exists()
+    write_recording(from_result(triangle, every=40), tmp_path / "small.mcap")   # 11 samples: 154 messages

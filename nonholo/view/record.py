@@ -143,6 +143,10 @@ def write_recording(replay: Replay, path, network: dict | None = None) -> Path:
 
     path = Path(path)
     names = replay.names
+    messages = replay.t.size * (4 * len(names) + 2)
+    if messages > MAX_MESSAGES:
+        raise ValueError(f"a recording of {len(names)} robots and {replay.t.size} samples would hold {messages} "
+                         f"messages, more than {MAX_MESSAGES} (fewer samples: --every N)")
     with open(path, "wb") as stream:
         writer = Writer(stream)
         writer.start(profile=PROFILE, library="nonholo")
