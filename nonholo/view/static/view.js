@@ -57,6 +57,7 @@
     while (follow.options.length > 1) follow.remove(1);
     page.robots.forEach((r) => follow.add(new Option(r.name, r.name)));
     follow.value = state.follow;
+    $("note").textContent = page.reference || !page.robots.length ? "" : "no reference path in this source";
     buildTables();
   }
 
