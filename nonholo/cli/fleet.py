@@ -25,6 +25,9 @@ def register(subparsers) -> None:
                         help="override [simulation] control_period (a multiple of dt)")
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")
+    from nonholo.cli.view import add_fleet_view_arguments
+
+    add_fleet_view_arguments(parser)
     parser.set_defaults(handler=handle)
 
 
@@ -33,27 +36,42 @@ def handle(args: argparse.Namespace) -> int:
 
     from nonholo import examples
     from nonholo.cli.run import format_summary, write_outputs
+    from nonholo.cli.view import FleetViewing
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.launch import run_fleet
     from nonholo.sim.files import load_scenario
 
+    viewing = FleetViewing(args, "nonholo fleet")
     try:
         scenario = load_scenario(examples.resolve(args.scenario))
         if args.control_period is not None:
             scenario = dataclasses.replace(scenario, control_period=args.control_period, steps=None)
-        run = run_fleet(scenario, transport=args.transport, mode=args.mode)
+        viewing.start()
+        run = run_fleet(scenario, transport=args.transport, mode=args.mode, observer=viewing.observer,
+                        speed=viewing.speed)
     except NonholoInputError as exc:
+        viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except SimulationError as exc:
+        viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except BaseException:
+        viewing.stop()
+        raise
     summary = run.to_dict()
     try:
         if args.out:
             for written in write_outputs(run.result, summary, Path(args.out)):
                 print(f"wrote {written}", file=sys.stderr)
+        viewing.finish(run, summary)
+    except NonholoInputError as exc:
+        viewing.stop()
+        print(f"nonholo fleet: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except (OSError, ValueError) as exc:
+        viewing.stop()
         print(f"nonholo fleet: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     if args.json:
@@ -64,4 +82,6 @@ def handle(args: argparse.Namespace) -> int:
         network = summary["network"]
         print(f"network: {network['transport']} {network['mode']}, {network['control_steps']} control steps, "
               f"{network['control_steps_per_s']:.0f} steps/s")
+    sys.stdout.flush()
+    viewing.serve()
     return EXIT_OK

@@ -27,6 +27,10 @@ def register(subparsers) -> None:
                         help="keep every N-th sample in trajectories.csv (default: all)")
     parser.add_argument("--animate", metavar="FILE", help="write an animation of the run: FILE.gif, or FILE.mp4 "
                                                            "when ffmpeg is installed")
+    parser.add_argument("--record", metavar="FILE.mcap",
+                        help="write an MCAP recording (poses, commands, reference, formation errors, links) that "
+                             "Foxglove opens and `nonholo view` replays: at most 100 samples per simulated second, "
+                             "and every N-th with --every N")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=handle)
 
@@ -42,7 +46,8 @@ def handle(args: argparse.Namespace) -> int:
 
         if args.every < 1:
             raise NonholoInputError(f"--every must be a positive integer, got {args.every}")
-        result = simulate(scenario, record=bool(args.plot or args.out or args.animate or not args.json),
+        recorded = bool(args.plot or args.out or args.animate or args.record or not args.json)
+        result = simulate(scenario, record=recorded,
                           progress=False if args.quiet else None)
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
@@ -60,6 +65,12 @@ def handle(args: argparse.Namespace) -> int:
         if args.animate:
             result.write_gif(args.animate, progress=not args.quiet and sys.stderr.isatty())
             print(f"wrote {args.animate}", file=sys.stderr)
+        if args.record:
+            from nonholo.view.data import from_result
+            from nonholo.view.record import record_every, write_recording
+
+            write_recording(from_result(result, record_every(result.scenario.dt, args.every), summary), args.record)
+            print(f"wrote {args.record}", file=sys.stderr)
     except (OSError, ValueError) as exc:  # unwritable place, unknown image format
         print(f"nonholo run: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE

@@ -58,7 +58,12 @@ def robot_channel(name: str, peers, keys: dict) -> SecureChannel:
 
 
 def run_fleet(scenario: Scenario, transport: str = "inproc", mode: str = "lockstep",
-              wait_s: float = 20.0) -> FleetRun:
+              wait_s: float = 20.0, observer=None, speed: float | None = None) -> FleetRun:
+    """Run the fleet. ``observer``: a callable given the robot programs every
+    ``observer.period_s`` s of wall time while they run and once at the end (it must not
+    block: a live view publishes a snapshot), whose ``prepare(scenario, setups)``, if any, is
+    called before the robots start; ``speed``: pace the logical time at this many
+    times wall time (None: as fast as the robots go)."""
     if transport not in TRANSPORTS:
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
@@ -66,7 +71,9 @@ def run_fleet(scenario: Scenario, transport: str = "inproc", mode: str = "lockst
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
     started = time.perf_counter()
-    programs = asyncio.run(_inproc_lockstep(scenario, setups, wait_s))
+    if observer is not None and hasattr(observer, "prepare"):
+        observer.prepare(scenario, setups)
+    programs = asyncio.run(_inproc_lockstep(scenario, setups, wait_s, observer, speed))
     elapsed = time.perf_counter() - started
     n = scenario.n_steps + 1
     states = np.zeros((n, 4, len(scenario.robots)))
@@ -78,7 +85,8 @@ def run_fleet(scenario: Scenario, transport: str = "inproc", mode: str = "lockst
     return FleetRun(result, network_report(programs, transport, mode, elapsed, scenario))
 
 
-async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float) -> list[RobotProgram]:
+async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float, observer=None,
+                           speed: float | None = None) -> list[RobotProgram]:
     network = InProcNetwork()
     keys = fleet_keys(scenario.names)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
@@ -87,14 +95,42 @@ async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float) -> l
         plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
         channel = robot_channel(name, setup.parents + setup.children, keys)
         programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s))
+    if speed:
+        clock = paced_clock(speed)
+        for program in programs:
+            program.clock = clock
     tasks = [asyncio.ensure_future(p.run_lockstep()) for p in programs]
+    if observer is not None:
+        tasks.append(asyncio.ensure_future(_observe(observer, programs)))
     try:
-        await asyncio.gather(*tasks)
+        await asyncio.gather(*tasks[:len(programs)])
+        if observer is not None:
+            observer(programs)
     finally:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
     return programs
+
+
+def paced_clock(speed: float):
+    """An awaitable clock: returns once wall time since its first call reaches t / speed."""
+    start = []
+
+    async def clock(t: float) -> None:
+        if not start:
+            start.append(time.monotonic())
+        delay = start[0] + t / speed - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+    return clock
+
+
+async def _observe(observer, programs) -> None:
+    """Hand the programs to ``observer`` every ``observer.period_s`` until cancelled."""
+    while True:
+        observer(programs)
+        await asyncio.sleep(observer.period_s)
 
 
 def network_report(programs, transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:

@@ -71,6 +71,8 @@ class RobotProgram:
         self.states = np.zeros((n, 4))
         self.helds = np.zeros((n, kn.HELD_COUNT))
         self.elapsed_s = 0.0
+        self.k = -1          # the newest output step in ``states`` (watched by observers)
+        self.clock = None    # optional: awaited with the logical time at each control instant (pacing)
         _, self._xi_after = plant_steps(setup.contract)
         self._bearing, self._pair = follower_steps(setup.contract)
         self._root = root_step(setup.law, setup.gains, setup.contract) if setup.kind == ROOT else None
@@ -204,6 +206,8 @@ class RobotProgram:
                 x, y, theta = self.plant.pose()
                 if k % s.hold_every == 0:
                     instant = k // s.hold_every
+                    if self.clock is not None:
+                        await self.clock(k * s.dt)
                     await self._wait(lambda: all(self.progress[c] >= instant - WINDOW for c in s.children),
                                      "progress from the followers")
                     await self._wait(lambda: all(self.inbox[p] and self.inbox[p][-1].k >= k for p in s.parents),
@@ -219,6 +223,7 @@ class RobotProgram:
                                                              msg.progress_content(instant)))
                 self.states[k] = x, y, theta, xi
                 self.helds[k] = held
+                self.k = k
                 if k == s.n_steps:
                     break
                 self.plant.advance(k)
