@@ -8,6 +8,7 @@ TARGETS = (
     ("single_ms", "single simulation (Test 1, DFL, dt = 0.01 s)", "ms", "<= 4.5"),
     ("single_cold_s", "first call in a fresh process (JIT cache on disk)", "s", ""),
     ("batch_robot_steps_per_s", "batch of 10^4 robots", "robot-steps/s", ">= 1e8"),
+    ("formation_robot_steps_per_s", "batch of 10^3 chains of a leader and 7 followers", "robot-steps/s", ""),
     ("baseline_python_ms", "baseline: plain-Python RK4 loop", "ms", ""),
     ("baseline_solve_ivp_ms", "baseline: scipy solve_ivp (RK45, default tolerances)", "ms", ""),
     ("baseline_numpy_batch_robot_steps_per_s", "baseline: numpy-vectorized batch", "robot-steps/s", ""),

@@ -9,9 +9,15 @@ linearization from the origin, dt = 0.01 s (25 133 RK4 steps). Baselines:
   fastest setting and so the least flattering comparison) with a Python right-hand side;
 * ``baseline_numpy_batch_robot_steps_per_s``: RK4 of the whole batch as numpy array
   operations (the usual way to vectorize without a compiler).
+
+Beside the no-follower batch, ``formation_robot_steps_per_s`` runs 10^3 copies of the bundled
+7-follower chain (``formation-chain``: a leader under dynamic feedback and seven l–φ followers,
+each reading its parent's stage values) as one batch, statistics only, over its first
+``FORMATION_DURATION`` s.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import statistics
 import subprocess
@@ -21,16 +27,19 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from nonholo import references
+from nonholo import examples, references
 from nonholo.control.feedback_linearization import dynamic_feedback_law
 from nonholo.control.registry import controller
 from nonholo.references.feedforward import REF_DDX, REF_DDY, REF_DX, REF_DY, REF_X, REF_Y
+from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
 from nonholo.sim.simulator import simulate
 
 DT = 0.01
 BATCH_ROBOTS = 10_000
 BATCH_DURATION = 20.0
+FORMATION_COPIES = 1_000
+FORMATION_DURATION = 10.0
 
 
 def single_scenario() -> Scenario:
@@ -43,6 +52,14 @@ def batch_scenario(n: int = BATCH_ROBOTS, duration: float = BATCH_DURATION) -> S
     dfl = controller("dynamic-feedback")
     return Scenario(references.eight(), [Robot(f"r{i}", dfl, tuple(s)) for i, s in enumerate(starts)], dt=DT,
                     duration=duration)
+
+
+def formation_batch(copies: int = FORMATION_COPIES, duration: float = FORMATION_DURATION) -> list[Scenario]:
+    """``copies`` copies of the bundled 7-follower chain. Identical copies: the batch then runs
+    the example's own sub-step plan (perturbed starts would raise the start-up turn rates of
+    the deep links, and with them the sub-steps of every member)."""
+    chain = dataclasses.replace(load_scenario(examples.path("formation-chain")), duration=duration)
+    return [chain] * copies
 
 
 def median_time(function, repeats: int) -> float:
@@ -142,6 +159,13 @@ def run_benchmark(repeats: int = 15, progress=None) -> dict:
     batch = batch_scenario()
     batch_s = median_time(lambda: simulate(batch, record=False), 3)
     batch_work = BATCH_ROBOTS * batch.n_steps
+    say("batch of 10^3 seven-follower chains")
+    simulate(formation_batch(2), record=False)   # compiled before the clock starts
+    chains = formation_batch()
+    started = time.perf_counter()   # one run: it takes tens of seconds (its start-up needs hundreds of sub-steps)
+    simulate(chains, record=False)
+    formation_s = time.perf_counter() - started
+    formation_work = FORMATION_COPIES * len(chains[0].robots) * chains[0].n_steps
     say("baseline: plain-Python RK4 loop")
     python_s = median_time(lambda: python_rk4(single), 1)
     say("baseline: scipy solve_ivp")
@@ -153,6 +177,7 @@ def run_benchmark(repeats: int = 15, progress=None) -> dict:
         "single_ms": 1e3 * single_s,
         "single_cold_s": cold_s,
         "batch_robot_steps_per_s": batch_work / batch_s,
+        "formation_robot_steps_per_s": formation_work / formation_s,
         "baseline_python_ms": 1e3 * python_s,
         "baseline_solve_ivp_ms": 1e3 * ivp_s,
         "baseline_numpy_batch_robot_steps_per_s": BATCH_ROBOTS * small.n_steps / numpy_s,
