@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli.robot import add_simulation_overrides
 
 
 def register(subparsers) -> None:
@@ -17,31 +18,32 @@ def register(subparsers) -> None:
                     "section. Needs sampled-data control ([simulation] control_period).",
         epilog="Exit codes: 0 ok, 1 failure, 2 bad input.")
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
-    parser.add_argument("--transport", choices=("inproc",), default="inproc",
-                        help="inproc: every robot in this process (TCP processes: not yet)")
+    parser.add_argument("--transport", choices=("tcp", "inproc"),
+                        help="tcp: one process per robot over authenticated TCP (default, or [network] "
+                             "transport); inproc: every robot in this process")
     parser.add_argument("--mode", choices=("lockstep",), default="lockstep",
                         help="lockstep: logical time, equal to the centralized sampled-data run")
-    parser.add_argument("--control-period", type=float, metavar="S",
-                        help="override [simulation] control_period (a multiple of dt)")
+    add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")
     parser.set_defaults(handler=handle)
 
 
 def handle(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from nonholo import examples
     from nonholo.cli.run import format_summary, write_outputs
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.launch import run_fleet
-    from nonholo.sim.files import load_scenario
+    from nonholo.fleet.config import load_fleet
+    from nonholo.fleet.process import with_overrides
 
     try:
-        scenario = load_scenario(examples.resolve(args.scenario))
-        if args.control_period is not None:
-            scenario = dataclasses.replace(scenario, control_period=args.control_period, steps=None)
-        run = run_fleet(scenario, transport=args.transport, mode=args.mode)
+        source = examples.resolve(args.scenario)
+        scenario, config = load_fleet(source)
+        overrides = {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
+        scenario = with_overrides(scenario, **overrides)
+        run = run_fleet(scenario, transport=args.transport or config.transport, mode=args.mode, config=config,
+                        source=source, overrides=overrides)
     except NonholoInputError as exc:
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -1,33 +1,37 @@
 """Start every robot of a scenario and gather one result (``nonholo fleet``).
 
-``inproc``: every robot program in this process on one event loop, frames through the
-in-process transport (deterministic; for tests and for lockstep figures). The result is
-the simulator's own ``SimulationResult``, scored from the robots' trajectories and held
-commands by the kernel's statistics code, plus a ``network`` section.
+``tcp`` (default): one ``nonholo robot`` process per robot on this machine, each robot with
+followers serving them over authenticated TCP (``nonholo.fleet.spawn``, ``mesh``); there
+is no central hub. ``inproc``: every robot program in this process on one event loop,
+frames through the in-process transport (deterministic; for tests and for lockstep
+figures). The result is the simulator's own ``SimulationResult``, scored from the robots'
+trajectories and held commands by the kernel's statistics code, plus a ``network`` section.
 """
 from __future__ import annotations
 
 import asyncio
-import secrets
+import shutil
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from nonholo.comm.channel import SecureChannel
-from nonholo.comm.envelope import Opener, Sealer
 from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
+from nonholo.fleet.config import NetworkConfig
+from nonholo.fleet.keys import fleet_keys, robot_channel
 from nonholo.fleet.plant import SimulatedUnicycle
-from nonholo.fleet.robot import RobotProgram
+from nonholo.fleet.process import read_trace
+from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
+from nonholo.fleet.spawn import run_robot_processes
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
-TRANSPORTS = ("inproc",)
+TRANSPORTS = ("tcp", "inproc")
 MODES = ("lockstep",)
-KEY_BYTES = 32
 
 
 @dataclass
@@ -43,42 +47,50 @@ class FleetRun:
         return summary
 
 
-def fleet_keys(names) -> dict[str, tuple[int, int, bytes]]:
-    """Per robot (sender id, key id, secret): one key per sender (spec comm.md §3.1)."""
-    return {name: (i + 1, i + 1, secrets.token_bytes(KEY_BYTES)) for i, name in enumerate(names)}
-
-
-def robot_channel(name: str, peers, keys: dict) -> SecureChannel:
-    """Seals with ``name``'s key; opens only ``peers``' frames, each bound to its name."""
-    sender_id, key_id, secret = keys[name]
-    opener = Opener({keys[p][1]: keys[p][2] for p in peers},
-                    key_senders={keys[p][1]: frozenset({keys[p][0]}) for p in peers}, max_age_ms=60_000)
-    return SecureChannel(Sealer(secret, key_id=key_id, sender_id=sender_id), opener,
-                         senders={keys[p][0]: p for p in peers})
-
-
-def run_fleet(scenario: Scenario, transport: str = "inproc", mode: str = "lockstep",
-              wait_s: float = 20.0) -> FleetRun:
+def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep", wait_s: float = 20.0,
+              config: NetworkConfig | None = None, source: Path | None = None,
+              overrides: dict | None = None) -> FleetRun:
+    """Run ``scenario`` as a fleet. Robot processes (``tcp``) read the scenario from the
+    file ``source`` with ``overrides`` ({"duration", "dt", "control_period"}) applied, which
+    must give ``scenario``."""
     if transport not in TRANSPORTS:
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
         raise NonholoInputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    config = config or NetworkConfig(transport=transport)
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
     started = time.perf_counter()
-    programs = asyncio.run(_inproc_lockstep(scenario, setups, wait_s))
-    elapsed = time.perf_counter() - started
     n = scenario.n_steps + 1
     states = np.zeros((n, 4, len(scenario.robots)))
     helds = np.zeros((n, kn.HELD_COUNT, len(scenario.robots)))
-    for program in programs:
-        states[:, :, program.setup.index] = program.states
-        helds[:, :, program.setup.index] = program.helds
+    index = {name: i for i, name in enumerate(scenario.names)}
+    reports = []
+    if transport == "inproc":
+        for program in asyncio.run(_inproc_lockstep(scenario, setups, config, wait_s)):
+            states[:, :, program.setup.index] = program.states
+            helds[:, :, program.setup.index] = program.helds
+            reports.append(program.report())
+    else:
+        if source is None:
+            raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
+        run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
+        workdir, _ = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s)
+        try:
+            for name in scenario.names:
+                robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")
+                states[:, :, index[name]] = robot_states
+                helds[:, :, index[name]] = robot_helds
+                reports.append(report)
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+    elapsed = time.perf_counter() - started
     result = score_states(scenario, planned, states, helds, elapsed)
-    return FleetRun(result, network_report(programs, transport, mode, elapsed, scenario))
+    return FleetRun(result, network_report(reports, transport, mode, elapsed, scenario))
 
 
-async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float) -> list[RobotProgram]:
+async def _inproc_lockstep(scenario: Scenario, setups: dict, config: NetworkConfig,
+                           wait_s: float) -> list[RobotProgram]:
     network = InProcNetwork()
     keys = fleet_keys(scenario.names)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
@@ -86,7 +98,8 @@ async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float) -> l
     for name, setup in setups.items():
         plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
         channel = robot_channel(name, setup.parents + setup.children, keys)
-        programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s))
+        programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s,
+                                     LinkPlan(config.link, config.seed), config.watchdog))
     tasks = [asyncio.ensure_future(p.run_lockstep()) for p in programs]
     try:
         await asyncio.gather(*tasks)
@@ -97,21 +110,27 @@ async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float) -> l
     return programs
 
 
-def network_report(programs, transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
-    """Per link (parent → child): frames sent, received, rejected; per robot its loop figures."""
+def network_report(reports: list[dict], transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
+    """Per link (parent → child): frames sent, received, lost (by the link model or on the
+    way), rejected, and the age of the parent's state used at each control instant; per
+    robot its watchdog events and control-loop period."""
     links = {}
-    by_name = {p.setup.name: p for p in programs}
-    for program in programs:
-        for child in program.setup.children:
+    by_name = {r["name"]: r for r in reports}
+    for sender in reports:
+        name = sender["name"]
+        for child in sender["children"]:
             receiver = by_name[child]
-            name = program.setup.name
-            links[f"{name}->{child}"] = {"sent": program.tally.sent[child], "received": receiver.tally.received[name],
-                                         "lost": program.tally.sent[child] - receiver.tally.received[name]
-                                         - receiver.tally.rejected[name],
-                                         "rejected": receiver.tally.rejected[name]}
+            sent, dropped = sender["sent"].get(child, 0), sender["lost"].get(child, 0)
+            received, rejected = receiver["received"].get(name, 0), receiver["rejected"].get(name, 0)
+            links[f"{name}->{child}"] = {
+                "sent": sent, "received": received, "lost": dropped + max(sent - received - rejected, 0),
+                "lost_by_model": dropped, "rejected": rejected,
+                "latency_s": quantiles(receiver["latency"].get(name, [])),
+                "age_s": quantiles(receiver["ages"].get(name, []))}
     instants = len(range(0, scenario.n_steps + 1, scenario.hold_every))
+    loop = max((r["loop_s"] for r in reports), default=0.0)   # the slowest robot's control loop
     return {"transport": transport, "mode": mode, "control_period": scenario.control_period,
-            "elapsed_s": elapsed, "control_steps": instants,
-            "control_steps_per_s": instants / elapsed if elapsed > 0 else None, "links": links,
-            "robots": {p.setup.name: {"parents": list(p.setup.parents), "children": list(p.setup.children),
-                                      "loop_s": p.elapsed_s} for p in programs}}
+            "elapsed_s": elapsed, "control_steps": instants, "loop_s": loop,
+            "control_steps_per_s": instants / loop if loop > 0 else None, "links": links,
+            "robots": {r["name"]: {"parents": r["parents"], "children": r["children"], "loop_s": r["loop_s"],
+                                   "watchdog": r["events"], "period_s": r["period"]} for r in reports}}

@@ -22,8 +22,10 @@ from nonholo.comm.channel import SecureChannel
 from nonholo.comm.errors import CommError
 from nonholo.errors import SimulationError
 from nonholo.fleet import messages as msg
+from nonholo.fleet.links import IDEAL, LOST, LinkModel, newest_usable, usable_instants
 from nonholo.fleet.setup import BEARING, PAIR, ROOT, RobotSetup
 from nonholo.fleet.step import follower_steps, plant_steps, root_step
+from nonholo.fleet.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
 from nonholo.sim import kernel as kn
 
 WINDOW = 64          # instants a parent may run ahead of a subscriber's acknowledged progress
@@ -44,6 +46,30 @@ class LinkTally:
     sent: Counter = field(default_factory=Counter)
     received: Counter = field(default_factory=Counter)
     rejected: Counter = field(default_factory=Counter)
+    lost: Counter = field(default_factory=Counter)      # states the link model dropped at the send
+
+
+@dataclass(frozen=True)
+class LinkPlan:
+    """The link model of one run as a robot needs it: ``model(parent, child)``, ``seed``
+    and the number of control instants."""
+
+    model: object = lambda parent, child: IDEAL
+    seed: int = 0
+    instants: int = 0
+
+    def usable(self, parent: str, child: str, period: float) -> np.ndarray:
+        model: LinkModel = self.model(parent, child)
+        return usable_instants(model, self.seed, parent, child, self.instants, period)
+
+
+def quantiles(values) -> dict:
+    """p50, p99 and max of ``values`` (None when empty)."""
+    values = np.asarray(values, dtype=float)
+    if not values.size:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": float(np.percentile(values, 50)), "p99": float(np.percentile(values, 99)),
+            "max": float(values.max())}
 
 
 class RobotProgram:
@@ -54,9 +80,22 @@ class RobotProgram:
     limits is not believed)."""
 
     def __init__(self, setup: RobotSetup, plant, transport, channel: SecureChannel, limits: dict,
-                 wait_s: float = DEFAULT_WAIT_S) -> None:
+                 wait_s: float = DEFAULT_WAIT_S, links: LinkPlan | None = None,
+                 watchdog: WatchdogConfig | None = None) -> None:
         self.setup, self.plant, self.transport, self.channel = setup, plant, transport, channel
         self.limits, self.wait_s = limits, wait_s
+        self.watchdog = watchdog or WatchdogConfig()
+        instants = len(setup.control_steps)
+        period = setup.dt * setup.hold_every
+        links = links or LinkPlan(instants=instants)
+        links = LinkPlan(links.model, links.seed, instants)
+        # The link model, drawn by both ends alike: which of this robot's states each child
+        # never gets, and per parent the newest usable message at each instant.
+        self.drops = {c: links.usable(setup.name, c, period) == LOST for c in setup.children}
+        self.schedule = {p: newest_usable(links.usable(p, setup.name, period), instants) for p in setup.parents}
+        self.ages = {p: np.full(instants, np.nan) for p in setup.parents}
+        self.events: list[dict] = []
+        self.ticks = np.zeros(instants)
         # Per parent, the states received and not yet superseded, oldest first (bounded:
         # a parent runs at most WINDOW instants ahead of this robot's acknowledged progress).
         self.inbox: dict[str, deque] = {p: deque(maxlen=PARENT_STATES) for p in setup.parents}
@@ -161,14 +200,6 @@ class RobotProgram:
             await self._wait(agreed, "agree", bound=SUBSCRIBE_RETRY_S)
 
     # ------------------------------------------------------------------ control
-    def _use_states(self, k: int) -> None:
-        """Each parent's newest state of an instant ≤ k (spec fleet.md §3); older ones go."""
-        for parent, queue in self.inbox.items():
-            while len(queue) > 1 and queue[1].k <= k:
-                queue.popleft()
-            if queue and queue[0].k <= k:
-                self.latest[parent] = queue[0]
-
     def _command(self, k: int, x: float, y: float, theta: float, xi: float):
         """(v, ω, ξ̇, singular, sat v, sat ω) at control instant k (spec fleet.md §2.3)."""
         s = self.setup
@@ -189,6 +220,43 @@ class RobotProgram:
             target[3], k1, k2, d, s.sin_floor, s.v_max, s.omega_max)
         return v, omega, 0.0, singular, sat_v, sat_w
 
+    def _take_states(self, instant: int) -> tuple[float, bool]:
+        """Each parent's message of the instant its link schedule names usable at
+        ``instant`` (spec fleet.md §3); older ones go. Returns (age in s of the oldest in use,
+        ``math.inf`` when a parent has none; whether any is newer than at the last instant)."""
+        s = self.setup
+        period = s.dt * s.hold_every
+        age, new = 0.0, False
+        for parent, queue in self.inbox.items():
+            j = int(self.schedule[parent][instant])
+            if j < 0:
+                age = float("inf")
+                continue
+            step = j * s.hold_every
+            while len(queue) > 1 and queue[1].k <= step:
+                queue.popleft()
+            if queue and queue[0].k <= step:
+                previous = self.latest.get(parent)
+                self.latest[parent] = queue[0]
+                new = new or previous is None or queue[0].k > previous.k
+            else:
+                age = float("inf")
+                continue
+            used = (instant - self.latest[parent].k // s.hold_every) * period
+            self.ages[parent][instant] = used
+            age = max(age, used)
+        return age, new
+
+    def _ready(self, instant: int) -> bool:
+        """Every parent's scheduled message of ``instant`` has arrived (frames of a link
+        arrive in order, so a later one means it has; a lost one is never scheduled)."""
+        for parent in self.setup.parents:
+            j = self.schedule[parent][instant]
+            queue = self.inbox[parent]
+            if j >= 0 and not (queue and queue[-1].k >= j * self.setup.hold_every):
+                return False
+        return True
+
     async def run_lockstep(self) -> None:
         """The whole run on logical time; fills ``states`` and ``helds``."""
         self._replies: list = []
@@ -200,19 +268,35 @@ class RobotProgram:
             started = time.perf_counter()
             xi = float(s.start[3])
             held = (0.0,) * kn.HELD_COUNT
+            guard = WatchdogState()
+            period = s.dt * s.hold_every
             for k in range(s.n_steps + 1):
                 x, y, theta = self.plant.pose()
                 if k % s.hold_every == 0:
                     instant = k // s.hold_every
-                    await self._wait(lambda: all(self.progress[c] >= instant - WINDOW for c in s.children),
-                                     "progress from the followers")
-                    await self._wait(lambda: all(self.inbox[p] and self.inbox[p][-1].k >= k for p in s.parents),
-                                     f"state of instant {k} from {', '.join(s.parents)}")
-                    self._use_states(k)
-                    v, omega, xi_dot, singular, sat_v, sat_w = self._command(k, x, y, theta, xi)
-                    held = (v, omega, xi_dot, singular, sat_v, sat_w)
+                    self.ticks[instant] = time.perf_counter()
+                    if not all(self.progress[c] >= instant - WINDOW for c in s.children):
+                        await self._wait(lambda: all(self.progress[c] >= instant - WINDOW for c in s.children),
+                                         "progress from the followers")
+                    if not self._ready(instant):
+                        await self._wait(lambda: self._ready(instant),
+                                         f"state of instant {k} from {', '.join(s.parents)}")
+                    age, new = self._take_states(instant)
+                    if len(self.latest) == len(s.parents):
+                        command = self._command(k, x, y, theta, xi)
+                    else:
+                        command = (0.0,) * kn.HELD_COUNT
+                    if s.parents:
+                        guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
+                                                               command[1], period)
+                        if event is not None:
+                            self.events.append({"t": instant * period, "event": event, "age": age})
+                        if guard.mode != FOLLOWING:
+                            command = (v, omega, 0.0, 0.0, 0.0, 0.0)
+                    held = command
+                    v, omega = held[0], held[1]
                     self.plant.command(v, omega)
-                    await self._publish(k, x, y, theta, v, omega)
+                    await self._publish(k, instant, x, y, theta, v, omega)
                     if s.parents and instant % ACK_EVERY == 0:
                         for parent in s.parents:
                             await self._send(parent, msg.act("inform", s.name, parent, msg.conversation(s.name, parent),
@@ -226,16 +310,40 @@ class RobotProgram:
             self.elapsed_s = time.perf_counter() - started
             for parent in s.parents:
                 await self._send(parent, msg.act("cancel", s.name, parent, msg.conversation(s.name, parent)))
+            # Every follower has had every state once it cancels: only then may this robot
+            # close its links (bounded: a follower that is gone does not hold it).
+            await self._wait(lambda: not self.subscribers, "cancel from every follower", bound=self.wait_s)
         finally:
             receiver.cancel()
             await asyncio.gather(receiver, return_exceptions=True)
 
-    async def _publish(self, k: int, x: float, y: float, theta: float, v: float, omega: float) -> None:
+    async def _publish(self, k: int, instant: int, x: float, y: float, theta: float, v: float,
+                       omega: float) -> None:
         if not self.setup.children:
             return
         self.seq += 1
         state = msg.RobotState(self.setup.name, k, self.seq, k * self.setup.dt, x, y, theta, v, omega)
         content = state.to_content()
         for child in sorted(self.subscribers):
+            if self.drops[child][instant]:
+                self.tally.lost[child] += 1   # the link model loses it on the way
+                continue
             await self._send(child, msg.act("inform", self.setup.name, child,
                                             msg.conversation(child, self.setup.name), content))
+
+    def report(self) -> dict:
+        """What this robot measured: per peer frames sent, received, rejected, lost by the
+        link model; per parent the age of the state used at each instant; watchdog events;
+        the control loop's period (wall clock)."""
+        periods = np.diff(self.ticks[self.ticks > 0])
+        return {"name": self.setup.name, "parents": list(self.setup.parents),
+                "children": list(self.setup.children), "loop_s": self.elapsed_s,
+                "sent": dict(self.tally.sent), "received": dict(self.tally.received),
+                "rejected": dict(self.tally.rejected), "lost": dict(self.tally.lost),
+                "ages": {p: [float(a) for a in ages[~np.isnan(ages)]] for p, ages in self.ages.items()},
+                "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
+                                  for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
+                "latency": {}, "events": list(self.events), "transport": self.transport.stats(),
+                "period": {"mean": float(periods.mean()) if periods.size else None,
+                           "std": float(periods.std()) if periods.size else None,
+                           "max": float(periods.max()) if periods.size else None}}

@@ -1,0 +1,119 @@
+"""One robot program as its own OS process (``nonholo robot``): its plant, its links over
+TCP or Zenoh, and at the end a trace file the launcher gathers (states, held commands and
+the robot's report).
+
+Trace file: a NumPy ``.npz`` with ``states`` (N+1, 4), ``helds`` (N+1, HELD_COUNT) and
+``report`` (the JSON text of ``RobotProgram.report()``).
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import socket
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from nonholo.errors import NonholoInputError
+from nonholo.fleet.config import NetworkConfig
+from nonholo.fleet.keys import keys_from_file, robot_channel
+from nonholo.fleet.mesh import RobotLinks, split_address
+from nonholo.fleet.plant import SimulatedUnicycle
+from nonholo.fleet.robot import DEFAULT_WAIT_S, LinkPlan, RobotProgram
+from nonholo.fleet.setup import robot_setups
+from nonholo.sim.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class RobotOptions:
+    """How robot ``name`` reaches the others: ``listen`` "host:port" (with followers),
+    ``connect`` {parent: "host:port"}, ``keys`` the key file."""
+
+    name: str
+    keys: str
+    listen: str | None = None
+    connect: tuple[tuple[str, str], ...] = ()
+    wait_s: float = DEFAULT_WAIT_S
+    listen_fd: int | None = None    # a listening socket inherited from the launcher
+
+
+def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=None) -> Scenario:
+    """The scenario with [simulation] duration, dt, control_period replaced where given."""
+    changes = {k: v for k, v in (("duration", duration), ("dt", dt), ("control_period", control_period))
+               if v is not None}
+    if "dt" in changes or "duration" in changes or "control_period" in changes:
+        changes["steps"] = None
+    return replace(scenario, **changes) if changes else scenario
+
+
+def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotOptions, setup) -> tuple:
+    """(listen address or None, {parent: (host, port)}) from options, then [network.addresses]."""
+    given = dict(options.connect)
+    unknown = sorted(set(given) - set(setup.parents))
+    if unknown:
+        raise NonholoInputError(f"--connect: {unknown[0]!r} is not a parent of {options.name!r} "
+                                f"(parents: {', '.join(setup.parents) or 'none'})")
+    parents = {}
+    for parent in setup.parents:
+        text = given.get(parent, config.addresses.get(parent))
+        if text is None:
+            raise NonholoInputError(f"network.addresses.{parent}: no address for {options.name!r}'s parent "
+                                    f"{parent!r} (give it there or --connect {parent}=HOST:PORT)")
+        parents[parent] = split_address(text, f"address of {parent}")
+    listen = None
+    if setup.children:
+        if options.listen_fd is not None:
+            return socket.socket(fileno=options.listen_fd), parents
+        text = options.listen or config.addresses.get(options.name)
+        if text is None:
+            raise NonholoInputError(f"network.addresses.{options.name}: {options.name!r} has followers and needs "
+                                    "an address to listen on (or --listen HOST:PORT)")
+        listen = split_address(text, "--listen")
+    return listen, parents
+
+
+async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOptions, announce=None) -> RobotProgram:
+    """Run robot ``options.name`` in lockstep over TCP; ``announce(port)`` once it listens."""
+    setups = robot_setups(scenario)
+    if options.name not in setups:
+        raise NonholoInputError(f"--name: no robot {options.name!r} in the scenario "
+                                f"(robots: {', '.join(scenario.names)})"[:200])
+    setup = setups[options.name]
+    listen, parents = resolve_addresses(scenario, config, options, setup)
+    peers = setup.parents + setup.children
+    keys = keys_from_file(options.keys, scenario.names, (options.name, *peers))
+    plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
+    limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
+    links = RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, setup.children, parents, listen)
+    program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
+                           LinkPlan(config.link, config.seed), config.watchdog)
+    try:
+        port = await links.start()
+        if announce is not None:
+            announce(port)
+        await program.run_lockstep()
+    finally:
+        await links.close()
+    return program
+
+
+def write_trace(path, program: RobotProgram) -> None:
+    report = program.report()
+    temporary = f"{path}.part"
+    with open(temporary, "wb") as handle:
+        np.savez(handle, states=program.states, helds=program.helds, report=np.array(json.dumps(report)))
+    os.replace(temporary, path)
+
+
+def read_trace(path) -> tuple[np.ndarray, np.ndarray, dict]:
+    with np.load(path, allow_pickle=False) as data:
+        return data["states"], data["helds"], json.loads(str(data["report"]))
+
+
+def robot_main(scenario: Scenario, config: NetworkConfig, options: RobotOptions, trace: str | None,
+               announce=None) -> RobotProgram:
+    program = asyncio.run(run_robot(scenario, config, options, announce))
+    if trace:
+        write_trace(trace, program)
+    return program
