@@ -21,8 +21,9 @@ def register(subparsers) -> None:
     parser.add_argument("--transport", choices=("tcp", "inproc"),
                         help="tcp: one process per robot over authenticated TCP (default, or [network] "
                              "transport); inproc: every robot in this process")
-    parser.add_argument("--mode", choices=("lockstep",), default="lockstep",
-                        help="lockstep: logical time, equal to the centralized sampled-data run")
+    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                        help="lockstep: logical time, equal to the centralized sampled-data run; "
+                             "realtime: the wall clock at the control rate, with the watchdog")
     add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")

@@ -21,8 +21,7 @@ from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
 from nonholo.fleet.config import NetworkConfig
 from nonholo.fleet.keys import fleet_keys, robot_channel
-from nonholo.fleet.plant import SimulatedUnicycle
-from nonholo.fleet.process import read_trace
+from nonholo.fleet.process import make_plant, read_trace, run_program
 from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
 from nonholo.fleet.spawn import run_robot_processes
@@ -31,7 +30,7 @@ from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
 TRANSPORTS = ("tcp", "inproc")
-MODES = ("lockstep",)
+MODES = ("lockstep", "realtime")
 
 
 @dataclass
@@ -67,7 +66,7 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     index = {name: i for i, name in enumerate(scenario.names)}
     reports = []
     if transport == "inproc":
-        for program in asyncio.run(_inproc_lockstep(scenario, setups, config, wait_s)):
+        for program in asyncio.run(_inproc(scenario, setups, config, mode, wait_s)):
             states[:, :, program.setup.index] = program.states
             helds[:, :, program.setup.index] = program.helds
             reports.append(program.report())
@@ -75,7 +74,10 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         if source is None:
             raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
-        workdir, _ = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s)
+        if mode == "realtime":
+            run_s += scenario.duration
+        workdir, _ = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
+                                         extra={name: ["--mode", mode] for name in scenario.names})
         try:
             for name in scenario.names:
                 robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")
@@ -89,18 +91,18 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     return FleetRun(result, network_report(reports, transport, mode, elapsed, scenario))
 
 
-async def _inproc_lockstep(scenario: Scenario, setups: dict, config: NetworkConfig,
-                           wait_s: float) -> list[RobotProgram]:
+async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str,
+                 wait_s: float) -> list[RobotProgram]:
     network = InProcNetwork()
     keys = fleet_keys(scenario.names)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
     programs = []
     for name, setup in setups.items():
-        plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
+        plant = make_plant(setup, mode)
         channel = robot_channel(name, setup.parents + setup.children, keys)
         programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s,
                                      LinkPlan(config.link, config.seed), config.watchdog))
-    tasks = [asyncio.ensure_future(p.run_lockstep()) for p in programs]
+    tasks = [asyncio.ensure_future(run_program(p, mode, config)) for p in programs]
     try:
         await asyncio.gather(*tasks)
     finally:

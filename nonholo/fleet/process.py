@@ -19,7 +19,7 @@ from nonholo.errors import NonholoInputError
 from nonholo.fleet.config import NetworkConfig
 from nonholo.fleet.keys import keys_from_file, robot_channel
 from nonholo.fleet.mesh import RobotLinks, split_address
-from nonholo.fleet.plant import SimulatedUnicycle
+from nonholo.fleet.plant import SimulatedUnicycle, WallClockUnicycle
 from nonholo.fleet.robot import DEFAULT_WAIT_S, LinkPlan, RobotProgram
 from nonholo.fleet.setup import robot_setups
 from nonholo.sim.scenario import Scenario
@@ -36,6 +36,7 @@ class RobotOptions:
     connect: tuple[tuple[str, str], ...] = ()
     wait_s: float = DEFAULT_WAIT_S
     listen_fd: int | None = None    # a listening socket inherited from the launcher
+    mode: str = "lockstep"          # lockstep | realtime
 
 
 def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=None) -> Scenario:
@@ -74,7 +75,7 @@ def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotO
 
 
 async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOptions, announce=None) -> RobotProgram:
-    """Run robot ``options.name`` in lockstep over TCP; ``announce(port)`` once it listens."""
+    """Run robot ``options.name`` over TCP; ``announce(port)`` once it listens."""
     setups = robot_setups(scenario)
     if options.name not in setups:
         raise NonholoInputError(f"--name: no robot {options.name!r} in the scenario "
@@ -83,7 +84,7 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
     listen, parents = resolve_addresses(scenario, config, options, setup)
     peers = setup.parents + setup.children
     keys = keys_from_file(options.keys, scenario.names, (options.name, *peers))
-    plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
+    plant = make_plant(setup, options.mode)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
     links = RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, setup.children, parents, listen)
     program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
@@ -92,10 +93,24 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
         port = await links.start()
         if announce is not None:
             announce(port)
-        await program.run_lockstep()
+        await run_program(program, options.mode, config)
     finally:
         await links.close()
     return program
+
+
+def make_plant(setup, mode: str):
+    """The simulated unicycle: on logical time (lockstep) or on the wall clock (realtime)."""
+    if mode == "realtime":
+        return WallClockUnicycle(setup.start)
+    return SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
+
+
+async def run_program(program: RobotProgram, mode: str, config: NetworkConfig) -> None:
+    if mode == "realtime":
+        await program.run_realtime(predict=config.predict)
+    else:
+        await program.run_lockstep()
 
 
 def write_trace(path, program: RobotProgram) -> None:

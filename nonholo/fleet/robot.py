@@ -33,6 +33,10 @@ ACK_EVERY = 16       # a follower acknowledges its progress every this many inst
 DEFAULT_WAIT_S = 20.0
 SUBSCRIBE_RETRY_S = 0.25
 PARENT_STATES = 2 * WINDOW + 2 * ACK_EVERY
+HEARTBEAT_EVERY = 5       # realtime: a follower's progress inform (its heartbeat) every this many instants
+SUBSCRIBER_LOST_S = 0.5   # realtime: a follower silent this long is reported lost
+LATENCY_SAMPLES = 100_000
+END_WAIT_S = 1.0          # realtime: longest wait for the followers' cancel at the end
 
 
 class FleetError(SimulationError):
@@ -96,6 +100,13 @@ class RobotProgram:
         self.ages = {p: np.full(instants, np.nan) for p in setup.parents}
         self.events: list[dict] = []
         self.ticks = np.zeros(instants)
+        self.clock = time.monotonic
+        self.realtime = False
+        self.parent_epoch: dict[str, int] = {}
+        self.arrival: dict[str, float] = {}          # realtime: when the newest state of a parent came
+        self.latency = {p: deque(maxlen=LATENCY_SAMPLES) for p in setup.parents}
+        self.heard: dict[str, float] = {}            # realtime: when a follower was last heard
+        self.start_clock = 0.0
         # Per parent, the states received and not yet superseded, oldest first (bounded:
         # a parent runs at most WINDOW instants ahead of this robot's acknowledged progress).
         self.inbox: dict[str, deque] = {p: deque(maxlen=PARENT_STATES) for p in setup.parents}
@@ -122,7 +133,7 @@ class RobotProgram:
 
     def _accept(self, peer: str, frame: bytes) -> None:
         try:
-            _, message = self.channel.unpack(frame)
+            opened, message = self.channel.unpack(frame)
         except CommError:
             self.tally.rejected[peer] += 1
             return
@@ -132,15 +143,17 @@ class RobotProgram:
             self.tally.rejected[peer] += 1
             return
         try:
-            self._dispatch(sender, message)
+            self._dispatch(sender, message, opened.epoch)
         except CommError:
             self.tally.rejected[peer] += 1
             return
         self.tally.received[sender] += 1
         self._changed.set()
 
-    def _dispatch(self, sender: str, message) -> None:
+    def _dispatch(self, sender: str, message, epoch: int = 0) -> None:
         performative = message.performative
+        if sender in self.setup.children:
+            self.heard[sender] = self.clock()
         if sender in self.setup.children and performative == "subscribe":
             self.subscribers.add(sender)
             self._replies.append((sender, msg.act("agree", self.setup.name, sender, message.conversation_id,
@@ -155,8 +168,19 @@ class RobotProgram:
             v_max, omega_max = self.limits[sender]
             state = msg.read_state(message, v_max, omega_max)
             queue = self.inbox[sender]
+            if self.parent_epoch.setdefault(sender, epoch) != epoch:
+                # A new boot of the parent (the envelope's epoch; a replayed old epoch is
+                # rejected by the channel): its states restart, those of the old boot go.
+                self.parent_epoch[sender] = epoch
+                queue.clear()
+                self.latest.pop(sender, None)
+                self.events.append({"t": self._run_time(), "event": "parent-restarted", "robot": sender})
             if not queue or state.k > queue[-1].k:
                 queue.append(state)
+                if self.realtime:
+                    now = self.clock()
+                    self.arrival[sender] = now
+                    self.latency[sender].append(now - state.t)
         else:
             raise CommError(f"{performative} from {sender} is not part of the fleet protocol")
 
@@ -262,9 +286,9 @@ class RobotProgram:
         self._replies: list = []
         receiver = asyncio.ensure_future(self._receive())
         try:
-            await self._subscribe()
             s = self.setup
             await self._wait(lambda: self.subscribers >= set(s.children), "subscription from every follower")
+            await self._subscribe()
             started = time.perf_counter()
             xi = float(s.start[3])
             held = (0.0,) * kn.HELD_COUNT
@@ -317,12 +341,112 @@ class RobotProgram:
             receiver.cancel()
             await asyncio.gather(receiver, return_exceptions=True)
 
+    def _run_time(self) -> float:
+        return self.clock() - self.start_clock if self.start_clock else 0.0
+
+    async def run_realtime(self, predict: bool = False, end_wait_s: float = END_WAIT_S) -> None:
+        """The run on the wall clock (spec fleet.md §5): output samples every dt, control
+        every control period; the plant moves by itself between commands; a follower uses
+        its parents' newest states (zero-order hold, or with ``predict`` extrapolated along
+        the exact arc over their age) under the watchdog, and resubscribes to a silent parent."""
+        from nonholo.fleet.plant import unicycle_arc
+
+        self.realtime = True
+        self._replies = []
+        receiver = asyncio.ensure_future(self._receive())
+        s = self.setup
+        try:
+            await self._wait(lambda: self.subscribers >= set(s.children), "subscription from every follower")
+            await self._subscribe()
+            if s.parents:
+                await self._wait(lambda: all(self.inbox[p] for p in s.parents), "first state from the parents")
+            clock = self.clock
+            period = s.dt * s.hold_every
+            start = self.start_clock = clock()
+            started = time.perf_counter()
+            xi = float(s.start[3])
+            held = (0.0,) * kn.HELD_COUNT
+            guard = WatchdogState()
+            last_control = start
+            last_subscribe = start
+            seen = {p: -1 for p in s.parents}
+            for child in s.children:
+                self.heard[child] = start
+            for k in range(s.n_steps + 1):
+                delay = start + k * s.dt - clock()
+                if delay > 0:
+                    await asyncio.sleep(delay)
+                else:
+                    await asyncio.sleep(0)      # let frames in even when late
+                now = clock()
+                x, y, theta = self.plant.pose()
+                if k % s.hold_every == 0:
+                    instant = k // s.hold_every
+                    self.ticks[instant] = now
+                    xi += held[kn.HELD_XI_DOT] * (now - last_control)
+                    last_control = now
+                    age, new = 0.0, False
+                    for parent in s.parents:
+                        queue = self.inbox[parent]
+                        if not queue:
+                            age = float("inf")
+                            continue
+                        state = queue[-1]
+                        used = now - self.arrival.get(parent, -float("inf"))
+                        new = new or state.seq != seen[parent]
+                        seen[parent] = state.seq
+                        self.ages[parent][instant] = used
+                        age = max(age, used)
+                        if predict:
+                            px, py, ptheta = unicycle_arc(state.x, state.y, state.theta, state.v, state.omega,
+                                                          now - state.t if state.t <= now else 0.0)
+                            state = msg.RobotState(state.robot, state.k, state.seq, state.t, px, py, ptheta,
+                                                   state.v, state.omega)
+                        self.latest[parent] = state
+                    if s.parents and age > self.watchdog.stale_after and now - last_subscribe > SUBSCRIBE_RETRY_S:
+                        last_subscribe = now    # a silent parent may have restarted: subscribe again
+                        for parent in s.parents:
+                            await self._send(parent, msg.act("subscribe", s.name, parent,
+                                                             msg.conversation(s.name, parent),
+                                                             reply_with=f"{s.name}-subscribe"))
+                    command = self._command(k, x, y, theta, xi) if all(self.inbox[p] for p in s.parents) \
+                        else (0.0,) * kn.HELD_COUNT
+                    if s.parents:
+                        guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
+                                                               command[1], period)
+                        if event is not None:
+                            self.events.append({"t": now - start, "event": event, "age": age, "at": now})
+                        if guard.mode != FOLLOWING:
+                            command = (v, omega, 0.0, 0.0, 0.0, 0.0)
+                    held = command
+                    self.plant.command(held[0], held[1])
+                    await self._publish(k, instant, x, y, theta, held[0], held[1], t=clock())
+                    if s.parents and instant % HEARTBEAT_EVERY == 0:
+                        for parent in s.parents:
+                            await self._send(parent, msg.act("inform", s.name, parent, msg.conversation(s.name, parent),
+                                                             msg.progress_content(instant)))
+                    for child in sorted(self.subscribers):
+                        if now - self.heard.get(child, now) > SUBSCRIBER_LOST_S:
+                            self.subscribers.discard(child)
+                            self.events.append({"t": now - start, "event": "lost-subscriber", "robot": child,
+                                                "at": now})
+                self.states[k] = x, y, theta, xi
+                self.helds[k] = held
+            self.elapsed_s = time.perf_counter() - started
+            for parent in s.parents:
+                await self._send(parent, msg.act("cancel", s.name, parent, msg.conversation(s.name, parent)))
+            await self._wait(lambda: not self.subscribers, "cancel from every follower", bound=end_wait_s)
+        finally:
+            receiver.cancel()
+            await asyncio.gather(receiver, return_exceptions=True)
+
     async def _publish(self, k: int, instant: int, x: float, y: float, theta: float, v: float,
-                       omega: float) -> None:
+                       omega: float, t: float | None = None) -> None:
         if not self.setup.children:
             return
         self.seq += 1
-        state = msg.RobotState(self.setup.name, k, self.seq, k * self.setup.dt, x, y, theta, v, omega)
+        state = msg.RobotState(self.setup.name, k, self.seq, k * self.setup.dt if t is None else t, x, y, theta, v,
+                               omega)
         content = state.to_content()
         for child in sorted(self.subscribers):
             if self.drops[child][instant]:
@@ -343,7 +467,7 @@ class RobotProgram:
                 "ages": {p: [float(a) for a in ages[~np.isnan(ages)]] for p, ages in self.ages.items()},
                 "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
                                   for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
-                "latency": {}, "events": list(self.events), "transport": self.transport.stats(),
+                "latency": {p: list(samples) for p, samples in self.latency.items()}, "events": list(self.events), "transport": self.transport.stats(),
                 "period": {"mean": float(periods.mean()) if periods.size else None,
                            "std": float(periods.std()) if periods.size else None,
                            "max": float(periods.max()) if periods.size else None}}
