@@ -76,7 +76,7 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
         if mode == "realtime":
             run_s += scenario.duration
-        workdir, _ = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
+        workdir = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
                                          extra={name: ["--mode", mode] for name in scenario.names})
         try:
             for name in scenario.names:

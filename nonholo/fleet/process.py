@@ -11,6 +11,7 @@ import asyncio
 import json
 import os
 import socket
+import sys
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -93,10 +94,18 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
         port = await links.start()
         if announce is not None:
             announce(port)
-        await run_program(program, options.mode, config)
+        await run_program(program, options.mode, config, on_start=announce_running(options.name))
     finally:
         await links.close()
     return program
+
+
+def announce_running(name: str):
+    """Say on stderr when the control loop starts (``robot NAME: running at T``, T on the
+    monotonic clock), for whoever watches the process."""
+    def announce(t: float) -> None:
+        print(f"robot {name}: running at {t!r}", file=sys.stderr, flush=True)
+    return announce
 
 
 def make_plant(setup, mode: str):
@@ -106,9 +115,10 @@ def make_plant(setup, mode: str):
     return SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
 
 
-async def run_program(program: RobotProgram, mode: str, config: NetworkConfig) -> None:
+async def run_program(program: RobotProgram, mode: str, config: NetworkConfig, on_start=None) -> None:
+    """Run ``program`` in ``mode``; ``on_start(t)`` when a realtime loop starts (monotonic clock)."""
     if mode == "realtime":
-        await program.run_realtime(predict=config.predict)
+        await program.run_realtime(predict=config.predict, on_start=on_start)
     else:
         await program.run_lockstep()
 

@@ -344,7 +344,7 @@ class RobotProgram:
     def _run_time(self) -> float:
         return self.clock() - self.start_clock if self.start_clock else 0.0
 
-    async def run_realtime(self, predict: bool = False, end_wait_s: float = END_WAIT_S) -> None:
+    async def run_realtime(self, predict: bool = False, end_wait_s: float = END_WAIT_S, on_start=None) -> None:
         """The run on the wall clock (spec fleet.md §5): output samples every dt, control
         every control period; the plant moves by itself between commands; a follower uses
         its parents' newest states (zero-order hold, or with ``predict`` extrapolated along
@@ -363,6 +363,8 @@ class RobotProgram:
             clock = self.clock
             period = s.dt * s.hold_every
             start = self.start_clock = clock()
+            if on_start is not None:
+                on_start(start)
             started = time.perf_counter()
             xi = float(s.start[3])
             held = (0.0,) * kn.HELD_COUNT

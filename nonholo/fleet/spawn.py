@@ -33,13 +33,42 @@ class LaunchError(SimulationError):
 
 @dataclass
 class Robots:
-    """Running robot processes by name, and where their outputs go."""
+    """Running robot processes by name, their commands, the listening sockets the launcher
+    keeps (so that a restarted robot takes over its port) and the work directory."""
 
     workdir: Path
     processes: dict = field(default_factory=dict)   # name -> Popen
+    commands: dict = field(default_factory=dict)    # name -> (argv, inherited fds)
+    listeners: dict = field(default_factory=dict)   # name -> listening socket
+
+    def start(self, name: str) -> subprocess.Popen:
+        command, fds = self.commands[name]
+        with open(self.workdir / f"{name}.err", "ab") as errors:
+            process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors,
+                                       pass_fds=fds, start_new_session=True)
+        self.processes[name] = process
+        return process
+
+    def wait(self, run_s: float, allowed: frozenset = frozenset()) -> dict:
+        """Wait (at most ``run_s``) until every process has ended; LaunchError at the first
+        failure of a robot not in ``allowed``; the exit codes by name."""
+        deadline = time.monotonic() + run_s
+        while True:
+            codes = {name: p.poll() for name, p in self.processes.items()}
+            failed = [name for name, code in codes.items() if code not in (None, 0) and name not in allowed]
+            if failed:
+                raise LaunchError(f"robot {failed[0]} failed (exit {codes[failed[0]]}): "
+                                  f"{self.error_line(failed[0])}")
+            if all(code is not None for code in codes.values()):
+                return codes
+            if time.monotonic() > deadline:
+                late = [name for name, code in codes.items() if code is None]
+                raise LaunchError(f"robot {late[0]} did not finish within {run_s:g} s")
+            time.sleep(POLL_S)
 
     def stop_all(self) -> None:
-        """Terminate every process group still running, then kill and reap (bounded)."""
+        """Terminate every process group still running, then kill and reap (bounded), and
+        close the listening sockets."""
         for process in self.processes.values():
             if process.poll() is None:
                 _signal_group(process, signal.SIGTERM)
@@ -52,6 +81,8 @@ class Robots:
         for process in self.processes.values():
             _signal_group(process, signal.SIGKILL)   # the whole group, stray children too
             process.wait()
+        for listener in self.listeners.values():
+            listener.close()
 
     def error_line(self, name: str) -> str:
         try:
@@ -78,68 +109,56 @@ def robot_command(source: Path, name: str, keys: Path, trace: Path, overrides: d
     return command + extra
 
 
-def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                        run_s: float, extra: dict | None = None, on_started=None) -> tuple[Path, Robots]:
-    """Run every robot of ``scenario`` (read from ``source`` with ``overrides``) as its own
-    process; return the work directory holding ``NAME.npz`` traces (the caller removes it).
-    ``run_s`` bounds the whole run after start-up; ``on_started(robots)`` runs once all started
-    (fault tests use it); ``extra`` {name: [options]}."""
-    workdir = Path(tempfile.mkdtemp(prefix="nonholo-fleet-"))
-    robots = Robots(workdir)
-    sockets = []
+def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
+                          extra: dict | None = None) -> Robots:
+    """Start every robot of ``scenario`` (read from ``source`` with ``overrides``) as its own
+    process, writing ``NAME.npz`` traces to a new work directory; ``extra`` {name: [options]}.
+    The caller must ``stop_all()`` (in a ``finally``) and remove the work directory."""
+    robots = Robots(Path(tempfile.mkdtemp(prefix="nonholo-fleet-")))
     try:
         if keys is None:
-            keys = workdir / "fleet.keys"
+            keys = robots.workdir / "fleet.keys"
             write_fleet_key_file(keys, scenario.names)
         children = {r.name: [] for r in scenario.robots}
         for robot in scenario.robots:
             for parent in robot.parents:
                 children[parent].append(robot.name)
-        listeners = {}
         for name, kids in children.items():
             if kids:
                 listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
                 listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 listener.bind(("127.0.0.1", 0))
                 listener.listen(64)
-                sockets.append(listener)
-                listeners[name] = listener
-        ports = {name: s.getsockname()[1] for name, s in listeners.items()}
+                robots.listeners[name] = listener
+        ports = {name: s.getsockname()[1] for name, s in robots.listeners.items()}
         for robot in scenario.robots:
             name = robot.name
             options = [f"--connect={p}=127.0.0.1:{ports[p]}" for p in robot.parents]
             fds = ()
-            if name in listeners:
-                options += ["--listen-fd", str(listeners[name].fileno())]
-                fds = (listeners[name].fileno(),)
+            if name in robots.listeners:
+                options += ["--listen-fd", str(robots.listeners[name].fileno())]
+                fds = (robots.listeners[name].fileno(),)
             options += (extra or {}).get(name, [])
-            command = robot_command(source, name, keys, workdir / f"{name}.npz", overrides, wait_s, options)
-            with open(workdir / f"{name}.err", "wb") as errors:
-                robots.processes[name] = subprocess.Popen(command, stdin=subprocess.DEVNULL,
-                                                          stdout=subprocess.DEVNULL, stderr=errors,
-                                                          pass_fds=fds, start_new_session=True)
-        for listener in sockets:
-            listener.close()
-        sockets.clear()
-        if on_started is not None:
-            on_started(robots)
-        deadline = time.monotonic() + run_s
-        while True:
-            codes = {name: p.poll() for name, p in robots.processes.items()}
-            failed = [name for name, code in codes.items() if code not in (None, 0)]
-            if failed:
-                raise LaunchError(f"robot {failed[0]} failed (exit {codes[failed[0]]}): "
-                                  f"{robots.error_line(failed[0])}")
-            if all(code == 0 for code in codes.values()):
-                return workdir, robots
-            if time.monotonic() > deadline:
-                late = [name for name, code in codes.items() if code is None]
-                raise LaunchError(f"robot {late[0]} did not finish within {run_s:g} s")
-            time.sleep(POLL_S)
+            robots.commands[name] = (robot_command(source, name, keys, robots.workdir / f"{name}.npz", overrides,
+                                                   wait_s, options), fds)
+            robots.start(name)
     except BaseException:
-        shutil.rmtree(workdir, ignore_errors=True)
+        robots.stop_all()
+        shutil.rmtree(robots.workdir, ignore_errors=True)
+        raise
+    return robots
+
+
+def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
+                        run_s: float, extra: dict | None = None) -> Path:
+    """Run every robot as its own process until all end (bounded by ``run_s``); the work
+    directory holding the traces (the caller removes it). Every process is reaped."""
+    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra)
+    try:
+        robots.wait(run_s)
+        return robots.workdir
+    except BaseException:
+        shutil.rmtree(robots.workdir, ignore_errors=True)
         raise
     finally:
-        for listener in sockets:
-            listener.close()
         robots.stop_all()
