@@ -91,17 +91,21 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     return FleetRun(result, network_report(reports, transport, mode, elapsed, scenario))
 
 
-async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str,
-                 wait_s: float) -> list[RobotProgram]:
-    network = InProcNetwork()
-    keys = fleet_keys(scenario.names)
+def inproc_programs(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str, wait_s: float,
+                    network: InProcNetwork, keys: dict | None = None) -> list[RobotProgram]:
+    """Every robot program of ``scenario`` on the in-process ``network`` (fresh keys unless given)."""
+    keys = keys or fleet_keys(scenario.names)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
     programs = []
     for name, setup in setups.items():
-        plant = make_plant(setup, mode)
         channel = robot_channel(name, setup.parents + setup.children, keys)
-        programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s,
+        programs.append(RobotProgram(setup, make_plant(setup, mode), network.endpoint(name), channel, limits, wait_s,
                                      LinkPlan(config.link, config.seed), config.watchdog))
+    return programs
+
+
+async def run_programs(programs: list[RobotProgram], mode: str, config: NetworkConfig) -> list[RobotProgram]:
+    """Run programs on this event loop until all end; the first failure cancels the rest."""
     tasks = [asyncio.ensure_future(run_program(p, mode, config)) for p in programs]
     try:
         await asyncio.gather(*tasks)
@@ -112,9 +116,14 @@ async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode:
     return programs
 
 
+async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str,
+                  wait_s: float) -> list[RobotProgram]:
+    return await run_programs(inproc_programs(scenario, setups, config, mode, wait_s, InProcNetwork()), mode, config)
+
+
 def network_report(reports: list[dict], transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
-    """Per link (parent → child): frames sent, received, lost (by the link model or on the
-    way), rejected, and the age of the parent's state used at each control instant; per
+    """Per link (parent → child): states sent, received, lost (by the link model or on the
+    way), frames rejected (and all frames sent and accepted), and the age of the parent's state used at each control instant; per
     robot its watchdog events and control-loop period."""
     links = {}
     by_name = {r["name"]: r for r in reports}
@@ -122,11 +131,12 @@ def network_report(reports: list[dict], transport: str, mode: str, elapsed: floa
         name = sender["name"]
         for child in sender["children"]:
             receiver = by_name[child]
-            sent, dropped = sender["sent"].get(child, 0), sender["lost"].get(child, 0)
-            received, rejected = receiver["received"].get(name, 0), receiver["rejected"].get(name, 0)
+            sent, dropped = sender["states_sent"].get(child, 0), sender["lost"].get(child, 0)
+            received, rejected = receiver["states_received"].get(name, 0), receiver["rejected"].get(name, 0)
             links[f"{name}->{child}"] = {
-                "sent": sent, "received": received, "lost": dropped + max(sent - received - rejected, 0),
-                "lost_by_model": dropped, "rejected": rejected,
+                "sent": sent, "received": received, "lost": dropped + max(sent - received, 0),
+                "lost_by_model": dropped, "rejected": rejected, "frames_sent": sender["sent"].get(child, 0),
+                "frames_received": receiver["received"].get(name, 0),
                 "latency_s": quantiles(receiver["latency"].get(name, [])),
                 "age_s": quantiles(receiver["ages"].get(name, []))}
     instants = len(range(0, scenario.n_steps + 1, scenario.hold_every))

@@ -51,6 +51,8 @@ class LinkTally:
     received: Counter = field(default_factory=Counter)
     rejected: Counter = field(default_factory=Counter)
     lost: Counter = field(default_factory=Counter)      # states the link model dropped at the send
+    states_sent: Counter = field(default_factory=Counter)
+    states_received: Counter = field(default_factory=Counter)
 
 
 @dataclass(frozen=True)
@@ -175,6 +177,7 @@ class RobotProgram:
                 queue.clear()
                 self.latest.pop(sender, None)
                 self.events.append({"t": self._run_time(), "event": "parent-restarted", "robot": sender})
+            self.tally.states_received[sender] += 1
             if not queue or state.k > queue[-1].k:
                 queue.append(state)
                 if self.realtime:
@@ -456,6 +459,7 @@ class RobotProgram:
                 continue
             await self._send(child, msg.act("inform", self.setup.name, child,
                                             msg.conversation(child, self.setup.name), content))
+            self.tally.states_sent[child] += 1
 
     def report(self) -> dict:
         """What this robot measured: per peer frames sent, received, rejected, lost by the
@@ -466,6 +470,7 @@ class RobotProgram:
                 "children": list(self.setup.children), "loop_s": self.elapsed_s,
                 "sent": dict(self.tally.sent), "received": dict(self.tally.received),
                 "rejected": dict(self.tally.rejected), "lost": dict(self.tally.lost),
+                "states_sent": dict(self.tally.states_sent), "states_received": dict(self.tally.states_received),
                 "ages": {p: [float(a) for a in ages[~np.isnan(ages)]] for p, ages in self.ages.items()},
                 "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
                                   for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
