@@ -122,3 +122,16 @@ def test_forged_and_replayed_frames_are_rejected_without_effect(tmp_path):
     assert rejected == 2 * attacked["leader"].tally.sent["f1"]
     assert attacked["f1"].channel.rejected["ReplayedMessage"] > 0
     assert attacked["f1"].channel.rejected["ForgedMessage"] > 0
+
+
+def test_fleet_out_writes_the_link_health_figure(tmp_path, capsys):
+    from nonholo.cli import main
+
+    path, _, _ = chain(tmp_path, "[network]\nseed = 1\ndelay = 0.02\nloss = 0.2\n")
+    out = tmp_path / "out"
+    assert main(["fleet", str(path), "--transport", "inproc", "--duration", "1", "--dt", "0.01",
+                 "--control-period", "0.02", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "leader->f1" in text and max(len(line) for line in text.splitlines()) <= 100
+    for name in ("result.json", "trajectories.csv", "plot.png", "network.png"):
+        assert (out / name).stat().st_size > 0

@@ -26,7 +26,7 @@ def register(subparsers) -> None:
                              "realtime: the wall clock at the control rate, with the watchdog")
     add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")
+    parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv, plot.png and network.png (link health) to DIR")
     parser.set_defaults(handler=handle)
 
 
@@ -35,6 +35,7 @@ def handle(args: argparse.Namespace) -> int:
     from nonholo.cli.run import format_summary, write_outputs
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.launch import run_fleet
+    from nonholo.fleet.report import format_network, plot_link_health
     from nonholo.fleet.config import load_fleet
     from nonholo.fleet.process import with_overrides
 
@@ -56,6 +57,8 @@ def handle(args: argparse.Namespace) -> int:
         if args.out:
             for written in write_outputs(run.result, summary, Path(args.out)):
                 print(f"wrote {written}", file=sys.stderr)
+            plot_link_health(run.timelines, summary["network"], Path(args.out) / "network.png")
+            print(f"wrote {Path(args.out) / 'network.png'}", file=sys.stderr)
     except (OSError, ValueError) as exc:
         print(f"nonholo fleet: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE
@@ -64,7 +67,5 @@ def handle(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(format_summary(summary))
-        network = summary["network"]
-        print(f"network: {network['transport']} {network['mode']}, {network['control_steps']} control steps, "
-              f"{network['control_steps_per_s']:.0f} steps/s")
+        print(format_network(summary["network"]))
     return EXIT_OK

@@ -21,6 +21,7 @@ from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
 from nonholo.fleet.config import NetworkConfig
 from nonholo.fleet.keys import fleet_keys, robot_channel
+from nonholo.fleet.report import link_timelines
 from nonholo.fleet.process import make_plant, read_trace, run_program
 from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
@@ -39,6 +40,7 @@ class FleetRun:
 
     result: object
     network: dict
+    timelines: dict | None = None   # per link the age of the state used over time; events (not in JSON)
 
     def to_dict(self) -> dict:
         summary = self.result.to_dict()
@@ -88,7 +90,9 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
             shutil.rmtree(workdir, ignore_errors=True)
     elapsed = time.perf_counter() - started
     result = score_states(scenario, planned, states, helds, elapsed)
-    return FleetRun(result, network_report(reports, transport, mode, elapsed, scenario))
+    network = network_report(reports, transport, mode, elapsed, scenario)
+    network["stale_after"] = config.watchdog.stale_after
+    return FleetRun(result, network, link_timelines(reports))
 
 
 def inproc_programs(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str, wait_s: float,

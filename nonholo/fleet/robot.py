@@ -317,7 +317,7 @@ class RobotProgram:
                         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
                                                                command[1], period)
                         if event is not None:
-                            self.events.append({"t": instant * period, "event": event, "age": age})
+                            self.events.append({"t": instant * period, "event": event, "age": age if age != float("inf") else None})
                         if guard.mode != FOLLOWING:
                             command = (v, omega, 0.0, 0.0, 0.0, 0.0)
                     held = command
@@ -420,7 +420,7 @@ class RobotProgram:
                         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
                                                                command[1], period)
                         if event is not None:
-                            self.events.append({"t": now - start, "event": event, "age": age, "at": now})
+                            self.events.append({"t": now - start, "event": event, "age": age if age != float("inf") else None, "at": now})
                         if guard.mode != FOLLOWING:
                             command = (v, omega, 0.0, 0.0, 0.0, 0.0)
                     held = command
