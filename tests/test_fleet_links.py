@@ -83,8 +83,12 @@ def test_lockstep_honours_the_link_model_alike_in_process_and_over_tcp(tmp_path)
         parent, child = name.split("->")
         usable = usable_instants(config.link(parent, child), 11, parent, child, instants, 0.02)
         assert link["lost_by_model"] == (usable == LOST).sum() > 0
-        assert link["sent"] + link["lost_by_model"] == instants
-        assert b["links"][name] == link
+        # A follower cancels once it has used its last scheduled state: states after that
+        # (never usable to it) may or may not go out, depending on timing.
+        assert link["sent"] + link["lost_by_model"] <= instants
+        assert link["received"] == link["sent"] and link["rejected"] == 0
+        for key in ("lost_by_model", "age_s", "rejected"):
+            assert b["links"][name][key] == link[key]
         ages = (np.arange(instants) - link_schedule(config.link(parent, child), 11, parent, child, instants, 0.02))
         assert link["age_s"]["max"] == pytest.approx(ages[ages <= np.arange(instants)].max() * 0.02)
     events = [e["event"] for e in a["robots"]["f4"]["watchdog"]]
