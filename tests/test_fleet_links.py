@@ -136,6 +136,7 @@ def test_fleet_out_writes_the_link_health_figure(tmp_path, capsys):
     assert main(["fleet", str(path), "--transport", "inproc", "--duration", "1", "--dt", "0.01",
                  "--control-period", "0.02", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "leader->f1" in text and max(len(line) for line in text.splitlines()) <= 100
+    network = text[text.index("network: "):]
+    assert "leader->f1" in network and max(len(line) for line in network.splitlines()) <= 100
     for name in ("result.json", "trajectories.csv", "plot.png", "network.png"):
         assert (out / name).stat().st_size > 0
