@@ -477,4 +477,5 @@ class RobotProgram:
                 "latency": {p: list(samples) for p, samples in self.latency.items()}, "events": list(self.events), "transport": self.transport.stats(),
                 "period": {"mean": float(periods.mean()) if periods.size else None,
                            "std": float(periods.std()) if periods.size else None,
+                           "p99": float(np.percentile(periods, 99)) if periods.size else None,
                            "max": float(periods.max()) if periods.size else None}}
