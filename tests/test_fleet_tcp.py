@@ -62,3 +62,15 @@ def test_bad_network_table_is_one_line_exit_2(table, field, tmp_path, capsys):
     assert main(["fleet", str(path), "--control-period", "0.02", "--json"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and field in err and "Traceback" not in err
+
+
+def test_zenoh_lockstep_equals_centralized_sampled_data(tmp_path):
+    pytest.importorskip("zenoh")
+    path = tmp_path / "tree.toml"
+    path.write_text(CASES["tree-ll"]())
+    scenario, config = load_fleet(path)
+    overrides = {**OVERRIDES, "duration": 1.0}
+    scenario = with_overrides(scenario, **overrides)
+    run = run_fleet(scenario, transport="zenoh", config=config, source=path, overrides=overrides, wait_s=15.0)
+    assert_same_result(simulate(scenario), run.result)
+    assert run.network["transport"] == "zenoh"

@@ -18,9 +18,10 @@ def register(subparsers) -> None:
                     "section. Needs sampled-data control ([simulation] control_period).",
         epilog="Exit codes: 0 ok, 1 failure, 2 bad input.")
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
-    parser.add_argument("--transport", choices=("tcp", "inproc"),
+    parser.add_argument("--transport", choices=("tcp", "zenoh", "inproc"),
                         help="tcp: one process per robot over authenticated TCP (default, or [network] "
-                             "transport); inproc: every robot in this process")
+                             "transport); zenoh: one process per robot, Zenoh peers; inproc: every robot in "
+                             "this process")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                         help="lockstep: logical time, equal to the centralized sampled-data run; "
                              "realtime: the wall clock at the control rate, with the watchdog")

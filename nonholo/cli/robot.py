@@ -37,6 +37,9 @@ def register(subparsers) -> None:
                         help="a parent's address (repeat per parent); default [network.addresses]")
     parser.add_argument("--keys", metavar="FILE", help="key file (mode 0600; key id i+1 is robot i); "
                                                        "default [network] keys")
+    parser.add_argument("--transport", choices=("tcp", "zenoh"),
+                        help="tcp (default, or [network] transport); zenoh: addresses are Zenoh endpoints "
+                             "such as tcp/192.168.1.10:7447")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                         help="lockstep: logical time, equal to the centralized sampled-data run; "
                              "realtime: the wall clock at the control rate, with the watchdog")
@@ -71,7 +74,9 @@ def handle(args: argparse.Namespace) -> int:
             raise NonholoInputError("network.keys: no key file (give --keys FILE or [network] keys)")
         if not 0 < args.wait <= 3600:
             raise NonholoInputError(f"--wait: expected seconds in (0, 3600], got {args.wait:g}")
-        options = RobotOptions(args.name, keys, args.listen, tuple(connect), args.wait, args.listen_fd, args.mode)
+        transport = args.transport or ("zenoh" if config.transport == "zenoh" else "tcp")
+        options = RobotOptions(args.name, keys, args.listen, tuple(connect), args.wait, args.listen_fd, args.mode,
+                               transport)
         program = robot_main(scenario, config, options, args.trace, announce)
     except NonholoInputError as exc:
         print(f"nonholo robot: {exc}", file=sys.stderr)

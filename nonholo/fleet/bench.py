@@ -94,6 +94,15 @@ def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None) 
         figures["realtime_tcp"] = trials
         passed = [t["rate_hz"] for t in trials if t["sustained"]]
         figures["highest_sustained_hz"] = max(passed) if passed else None
+        try:
+            import zenoh  # noqa: F401
+        except ImportError:
+            figures["realtime_zenoh_100hz"] = None
+        else:
+            say(f"realtime leader + {FOLLOWERS} followers over Zenoh at 100 Hz")
+            network = _run(folder, "star", star_text(), "zenoh", "realtime", duration=duration, dt=0.01,
+                           control_period=0.01)
+            figures["realtime_zenoh_100hz"] = realtime_figures(network, 100)
     return figures
 
 
@@ -107,4 +116,8 @@ def format_bench(figures: dict) -> str:
                      f"{t['latency_max_ms']:7.2f} {t['sent']:>6} {t['lost']:>5} {t['period_mean_ms']:7.3f} "
                      f"{t['period_p99_ms']:7.3f} {t['stops']:>5}  {'yes' if t['sustained'] else 'no'}")
     lines.append(f"highest sustained control rate of 8 processes: {figures['highest_sustained_hz']} Hz")
+    zenoh = figures.get("realtime_zenoh_100hz")
+    if zenoh:
+        lines.append(f"Zenoh at 100 Hz: latency p50 {zenoh['latency_p50_ms']:.3f} ms, p99 {zenoh['latency_p99_ms']:.3f} "
+                     f"ms, {zenoh['lost']} of {zenoh['sent']} states lost, {zenoh['stops']} watchdog stops")
     return "\n".join(lines)

@@ -30,7 +30,7 @@ from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
-TRANSPORTS = ("tcp", "inproc")
+TRANSPORTS = ("tcp", "zenoh", "inproc")
 MODES = ("lockstep", "realtime")
 
 
@@ -79,7 +79,8 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         if mode == "realtime":
             run_s += scenario.duration
         workdir = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
-                                         extra={name: ["--mode", mode] for name in scenario.names})
+                                     extra={name: ["--mode", mode] for name in scenario.names},
+                                     transport=transport)
         try:
             for name in scenario.names:
                 robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")

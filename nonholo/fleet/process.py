@@ -38,6 +38,7 @@ class RobotOptions:
     wait_s: float = DEFAULT_WAIT_S
     listen_fd: int | None = None    # a listening socket inherited from the launcher
     mode: str = "lockstep"          # lockstep | realtime
+    transport: str = "tcp"          # tcp | zenoh (addresses then Zenoh endpoints, "tcp/host:port")
 
 
 def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=None) -> Scenario:
@@ -62,7 +63,7 @@ def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotO
         if text is None:
             raise NonholoInputError(f"network.addresses.{parent}: no address for {options.name!r}'s parent "
                                     f"{parent!r} (give it there or --connect {parent}=HOST:PORT)")
-        parents[parent] = split_address(text, f"address of {parent}")
+        parents[parent] = text if options.transport == "zenoh" else split_address(text, f"address of {parent}")
     listen = None
     if setup.children:
         if options.listen_fd is not None:
@@ -71,7 +72,7 @@ def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotO
         if text is None:
             raise NonholoInputError(f"network.addresses.{options.name}: {options.name!r} has followers and needs "
                                     "an address to listen on (or --listen HOST:PORT)")
-        listen = split_address(text, "--listen")
+        listen = text if options.transport == "zenoh" else split_address(text, "--listen")
     return listen, parents
 
 
@@ -87,17 +88,31 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
     keys = keys_from_file(options.keys, scenario.names, (options.name, *peers))
     plant = make_plant(setup, options.mode)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
-    links = RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, setup.children, parents, listen)
+    links = make_links(scenario, options, setup, keys, listen, parents)
     program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
                            LinkPlan(config.link, config.seed), config.watchdog)
     try:
-        port = await links.start()
+        port = await links.start() if isinstance(links, RobotLinks) else None
         if announce is not None:
             announce(port)
         await run_program(program, options.mode, config, on_start=announce_running(options.name))
     finally:
         await links.close()
     return program
+
+
+def make_links(scenario: Scenario, options: RobotOptions, setup, keys: dict, listen, parents: dict):
+    """The robot's transport: ``RobotLinks`` over TCP, or a Zenoh peer listening on its
+    endpoint (with followers) and connecting to its parents' (no link-level key: every frame
+    is still authenticated by its envelope)."""
+    if options.transport != "zenoh":
+        return RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, setup.children, parents,
+                          listen)
+    try:
+        from nonholo.comm.transports.zenoh import ZenohTransport, peer_config
+    except ImportError:
+        raise NonholoInputError("transport zenoh: install the extra nonholo[zenoh]") from None
+    return ZenohTransport(options.name, scenario.name, peer_config([listen] if listen else [], list(parents.values())))
 
 
 def announce_running(name: str):

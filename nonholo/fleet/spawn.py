@@ -40,6 +40,7 @@ class Robots:
     processes: dict = field(default_factory=dict)   # name -> Popen
     commands: dict = field(default_factory=dict)    # name -> (argv, inherited fds)
     listeners: dict = field(default_factory=dict)   # name -> listening socket
+    endpoints: dict = field(default_factory=dict)   # name -> Zenoh endpoint it listens on
 
     def start(self, name: str) -> subprocess.Popen:
         command, fds = self.commands[name]
@@ -109,8 +110,16 @@ def robot_command(source: Path, name: str, keys: Path, trace: Path, overrides: d
     return command + extra
 
 
+def free_port() -> int:
+    """A port the OS says is free now (for Zenoh endpoints, which bind by themselves: another
+    program could take it before the robot binds it; TCP robots inherit bound sockets)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                          extra: dict | None = None) -> Robots:
+                          extra: dict | None = None, transport: str = "tcp") -> Robots:
     """Start every robot of ``scenario`` (read from ``source`` with ``overrides``) as its own
     process, writing ``NAME.npz`` traces to a new work directory; ``extra`` {name: [options]}.
     The caller must ``stop_all()`` (in a ``finally``) and remove the work directory."""
@@ -124,7 +133,9 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
             for parent in robot.parents:
                 children[parent].append(robot.name)
         for name, kids in children.items():
-            if kids:
+            if kids and transport == "zenoh":
+                robots.endpoints[name] = f"tcp/127.0.0.1:{free_port()}"
+            elif kids:
                 listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
                 listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 listener.bind(("127.0.0.1", 0))
@@ -133,8 +144,13 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
         ports = {name: s.getsockname()[1] for name, s in robots.listeners.items()}
         for robot in scenario.robots:
             name = robot.name
-            options = [f"--connect={p}=127.0.0.1:{ports[p]}" for p in robot.parents]
+            if transport == "zenoh":
+                options = ["--transport", "zenoh"] + [f"--connect={p}={robots.endpoints[p]}" for p in robot.parents]
+            else:
+                options = [f"--connect={p}=127.0.0.1:{ports[p]}" for p in robot.parents]
             fds = ()
+            if name in robots.endpoints:
+                options += ["--listen", robots.endpoints[name]]
             if name in robots.listeners:
                 options += ["--listen-fd", str(robots.listeners[name].fileno())]
                 fds = (robots.listeners[name].fileno(),)
@@ -150,10 +166,10 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
 
 
 def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                        run_s: float, extra: dict | None = None) -> Path:
+                        run_s: float, extra: dict | None = None, transport: str = "tcp") -> Path:
     """Run every robot as its own process until all end (bounded by ``run_s``); the work
     directory holding the traces (the caller removes it). Every process is reaped."""
-    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra)
+    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra, transport)
     try:
         robots.wait(run_s)
         return robots.workdir
