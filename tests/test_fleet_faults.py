@@ -20,7 +20,7 @@ from nonholo.fleet.spawn import start_robot_processes
 DETECT_S = 0.25   # the target is 150 ms (stale_after 0.1 s + one control period); margin for a loaded machine
 SCENARIO = """name = "faults"
 [simulation]
-duration = 3.0
+duration = 2.0
 dt = 0.01
 control_period = 0.02
 [reference]
@@ -66,17 +66,17 @@ def wait_running(robots, names, bound=15.0):
 
 @pytest.fixture
 def fleet(tmp_path):
-    path = tmp_path / "faults.toml"
-    path.write_text(SCENARIO)
-    scenario, config = load_fleet(path)
     started = []
 
-    def start():
+    def start(duration=2.0):
+        path = tmp_path / "faults.toml"
+        path.write_text(SCENARIO.replace("duration = 2.0", f"duration = {duration!r}"))
+        scenario, _ = load_fleet(path)
         robots = start_robot_processes(path, scenario, None, {}, 10.0,
                                        extra={n: ["--mode", "realtime"] for n in scenario.names})
         started.append(robots)
         wait_running(robots, scenario.names)
-        time.sleep(0.5)
+        time.sleep(0.3)
         return robots
 
     yield start
@@ -148,7 +148,7 @@ def test_follower_killed_others_continue_and_wrong_key_is_refused(fleet):
 
 
 def test_leader_restarted_followers_rejoin(fleet):
-    robots = fleet()
+    robots = fleet(duration=4.0)
     os.killpg(robots.processes["leader"].pid, signal.SIGKILL)
     robots.processes["leader"].wait(5.0)
     robots.start("leader")
@@ -161,3 +161,42 @@ def test_leader_restarted_followers_rejoin(fleet):
         resumes = events(report, "resume")
         assert resumes and resumes[-1]["t"] > restarted[0]["t"], name
         assert np.any(held[-50:, 0] != 0.0), name          # following the new leader again
+
+
+def test_leader_failover_successor_tracks_and_formation_reforms(tmp_path):
+    from nonholo.fleet.setup import robot_setups
+    from nonholo.models.formation_geometry import link_geometry
+
+    path = tmp_path / "failover.toml"
+    path.write_text(SCENARIO.replace("duration = 2.0", "duration = 3.5")
+                    + '[network]\nfailover = true\norder = ["leader", "f1"]\n')
+    scenario, config = load_fleet(path)
+    robots = start_robot_processes(path, scenario, None, {}, 10.0,
+                                   extra={n: ["--mode", "realtime"] for n in scenario.names}, failover=config.order)
+    try:
+        wait_running(robots, scenario.names)
+        time.sleep(0.8)
+        os.killpg(robots.processes["leader"].pid, signal.SIGKILL)
+        robots.wait(20.0, allowed=frozenset({"leader"}))
+        done = traces(robots, ["f1", "f2", "f3"])
+    finally:
+        robots.stop_all()
+        shutil.rmtree(robots.workdir, ignore_errors=True)
+    took = events(done["f1"][2], "took-over")
+    assert took and took[0]["robot"] == "leader"
+    assert [e["robot"] for e in events(done["f3"][2], "new-parent")] == ["f1"]
+    rows = robot_setups(scenario)["leader"].rows
+    states = done["f1"][0]
+    k0 = int(round(took[0]["t"] / scenario.dt))
+    error = np.hypot(states[:, 0] - rows[:, 1], states[:, 1] - rows[:, 2])
+    assert error[-20:].max() < 0.5 * error[k0:k0 + 20].max()    # the new leader converges to the reference
+    f3 = done["f3"][0]
+    from nonholo.sim import kernel as kn
+
+    l_d, d = 2.0, robot_setups(scenario)["f3"].fields[kn.OFFSET_D]
+    distances = []
+    for k in (k0 + 10, len(f3) - 1):
+        geometry = link_geometry(states[k, 0], states[k, 1], states[k, 2], f3[k, 0], f3[k, 1], np.cos(f3[k, 2]),
+                                 np.sin(f3[k, 2]), f3[k, 2], d)
+        distances.append(abs(geometry[0] - l_d))
+    assert distances[1] < distances[0]     # the formation re-forms around the new leader

@@ -128,15 +128,15 @@ def test_forged_and_replayed_frames_are_rejected_without_effect(tmp_path):
     assert attacked["f1"].channel.rejected["ForgedMessage"] > 0
 
 
-def test_fleet_out_writes_the_link_health_figure(tmp_path, capsys):
-    from nonholo.cli import main
+def test_link_health_figure_and_network_table(tmp_path):
+    from nonholo.fleet.report import format_network, plot_link_health
 
-    path, _, _ = chain(tmp_path, "[network]\nseed = 1\ndelay = 0.02\nloss = 0.2\n")
-    out = tmp_path / "out"
-    assert main(["fleet", str(path), "--transport", "inproc", "--duration", "1", "--dt", "0.01",
-                 "--control-period", "0.02", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    network = text[text.index("network: "):]
-    assert "leader->f1" in network and max(len(line) for line in network.splitlines()) <= 100
-    for name in ("result.json", "trajectories.csv", "plot.png", "network.png"):
-        assert (out / name).stat().st_size > 0
+    path = tmp_path / "two.toml"
+    path.write_text(example_text("formation-circle-switch", ("at = 100.0", "at = 0.5"))
+                    + "[network]\nseed = 1\ndelay = 0.02\nloss = 0.2\n")
+    scenario, config = load_fleet(path)
+    run = run_fleet(with_overrides(scenario, **{**OVERRIDES, "duration": 1.0}), "inproc", config=config)
+    text = format_network(run.network)
+    assert "leader->follower" in text and max(len(line) for line in text.splitlines()) <= 100
+    plot_link_health(run.timelines, run.network, tmp_path / "network.png")
+    assert (tmp_path / "network.png").stat().st_size > 10_000

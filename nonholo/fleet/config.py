@@ -13,6 +13,9 @@ keys, the link model (spec fleet.md §3–4) and the watchdog (§5).
     decel_v = 2.0
     decel_omega = 8.0
     predict = false                # realtime: extrapolate the parent's state over its age
+    failover = false               # realtime: the leader's successor takes over when it is lost
+    order = ["leader", "f1"]       # the leader, then its successor (a direct l-phi follower)
+    failover_after = 0.3           # s of the leader's silence before the successor takes over
     [network.addresses]            # where a robot with followers listens
     leader = "192.168.1.10:7400"   # tcp host:port, or a Zenoh endpoint "tcp/host:port"
     [[network.links]]              # per-link overrides
@@ -36,7 +39,7 @@ from nonholo.tomlfile import describe_value, read_toml
 TRANSPORTS = ("tcp", "zenoh", "inproc")
 LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
 FIELDS = {"transport", "keys", "seed", "stale_after", "resume_after", "decel_v", "decel_omega", "predict",
-          "addresses", "links", *LINK_FIELDS}
+          "addresses", "links", "failover", "order", "failover_after", *LINK_FIELDS}
 MAX_DELAY_PERIODS = 24   # delay + jitter, in control periods (bounded lockstep inboxes)
 
 
@@ -50,6 +53,9 @@ class NetworkConfig:
     addresses: dict = field(default_factory=dict)
     default: LinkModel = IDEAL
     links: dict = field(default_factory=dict)   # (parent, child) -> LinkModel
+    failover: bool = False
+    order: tuple = ()                           # failover: the leader, then its successor
+    failover_after: float = 0.3                 # s of the leader's silence before the successor takes over
 
     def link(self, parent: str, child: str) -> LinkModel:
         return self.links.get((parent, child), self.default)
@@ -137,8 +143,30 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
         if edge in links:
             f.fail(where, f"link {edge[0]} -> {edge[1]} given twice")
         links[edge] = f.link_model(item, where, default, period)
+    failover = data.get("failover", False)
+    if not isinstance(failover, bool):
+        f.fail("network.failover", f"expected true or false, got {describe_value(failover)}")
+    order = data.get("order", list(scenario.names))
+    if "order" in data or failover:
+        if not isinstance(order, list) or len(order) < 2 or not all(isinstance(n, str) for n in order) \
+                or not set(order) <= names or len(set(order)) != len(order):
+            f.fail("network.order", "expected a list of at least two distinct robot names")
+    after = f.number(data, "failover_after", "network", 0.3, 60)
+    if failover:
+        roots = [r.name for r in scenario.robots if not r.parents]
+        by_name = {r.name: r for r in scenario.robots}
+        if roots != [order[0]]:
+            f.fail("network.order", f"failover needs one leader, first in the order (roots: {', '.join(roots)})")
+        for robot in scenario.robots:
+            if order[0] in robot.parents and getattr(robot, "law", None) != "separation-bearing":
+                f.fail("network.failover", f"{robot.name} follows the leader with an l-l law; failover hands "
+                                           "only l-phi followers over to the successor")
+        if order[0] not in by_name[order[1]].parents:
+            f.fail("network.order", f"the successor {order[1]} must follow the leader {order[0]} directly")
+        if after <= watchdog.stale_after:
+            f.fail("network.failover_after", "must exceed stale_after (the followers stop first)")
     return NetworkConfig(transport, Path(keys) if keys else None, seed, watchdog, predict, dict(addresses),
-                         default, links)
+                         default, links, failover, tuple(order), after)
 
 
 def load_fleet(path) -> tuple[Scenario, NetworkConfig]:

@@ -80,7 +80,8 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
             run_s += scenario.duration
         workdir = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
                                      extra={name: ["--mode", mode] for name in scenario.names},
-                                     transport=transport)
+                                     transport=transport,
+                                     failover=config.order if config.failover and mode == "realtime" else ())
         try:
             for name in scenario.names:
                 robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")

@@ -57,7 +57,8 @@ class Backoff:
 
 class RobotLinks(InboxTransport):
     """Links of robot ``name``: ``keys`` {robot: (key id, secret)} of itself and its peers;
-    ``listen`` (host, port) or a listening socket when it has children; ``parents`` {parent: (host, port)}."""
+    ``listen`` (host, port) or a listening socket when it has children (then only the
+    names of ``children`` may connect, each with its own key); ``parents`` {parent: (host, port)}."""
 
     def __init__(self, name: str, keys: dict, children: tuple[str, ...], parents: dict,
                  listen: tuple[str, int] | socket.socket | None, on_link=None) -> None:
@@ -76,14 +77,13 @@ class RobotLinks(InboxTransport):
     async def start(self) -> int | None:
         """Listen (if it has children) and start connecting to the parents; the port listened on."""
         port = None
-        if self._children:
+        if self._children and self._listen is not None:
             kid = {c: self._keys[c][0] for c in self._children}
             auth = LinkAuth({self._keys[c][0]: self._keys[c][1] for c in self._children}, peer_key_ids=kid)
             if isinstance(self._listen, socket.socket):
                 self.hub = await serve_tcp(self.name, auth=auth, sock=self._listen)
             else:
-                host, wanted = self._listen or ("127.0.0.1", 0)
-                self.hub = await serve_tcp(self.name, host, wanted, auth=auth)
+                self.hub = await serve_tcp(self.name, *self._listen, auth=auth)
             port = tcp_port(self.hub)
             self._tasks.append(asyncio.ensure_future(self._pump_hub()))
         for parent, address in self._parents.items():
@@ -141,6 +141,13 @@ class RobotLinks(InboxTransport):
                 self.unsent += 1
         except TransportClosed:
             self.unsent += 1
+
+    def add_parent(self, parent: str, address: tuple[str, int]) -> None:
+        """Link (and keep linked) to a new parent, as at the start."""
+        if parent not in self._parents:
+            self._parents[parent] = address
+            self.reconnects[parent] = 0
+            self._tasks.append(asyncio.ensure_future(self._keep_linked(parent, address)))
 
     def stats(self) -> dict:
         return {**super().stats(), "unsent": self.unsent, "reconnects": dict(self.reconnects),

@@ -21,7 +21,7 @@ from nonholo.fleet.config import NetworkConfig
 from nonholo.fleet.keys import keys_from_file, robot_channel
 from nonholo.fleet.mesh import RobotLinks, split_address
 from nonholo.fleet.plant import SimulatedUnicycle, WallClockUnicycle
-from nonholo.fleet.robot import DEFAULT_WAIT_S, LinkPlan, RobotProgram
+from nonholo.fleet.robot import DEFAULT_WAIT_S, Failover, LinkPlan, RobotProgram
 from nonholo.fleet.setup import robot_setups
 from nonholo.sim.scenario import Scenario
 
@@ -53,7 +53,7 @@ def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=No
 def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotOptions, setup) -> tuple:
     """(listen address or None, {parent: (host, port)}) from options, then [network.addresses]."""
     given = dict(options.connect)
-    unknown = sorted(set(given) - set(setup.parents))
+    unknown = sorted(set(given) - set(setup.parents if not config.failover else scenario.names))
     if unknown:
         raise NonholoInputError(f"--connect: {unknown[0]!r} is not a parent of {options.name!r} "
                                 f"(parents: {', '.join(setup.parents) or 'none'})")
@@ -65,7 +65,7 @@ def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotO
                                     f"{parent!r} (give it there or --connect {parent}=HOST:PORT)")
         parents[parent] = text if options.transport == "zenoh" else split_address(text, f"address of {parent}")
     listen = None
-    if setup.children:
+    if setup.children or (config.failover and options.name in config.order[1:2]):
         if options.listen_fd is not None:
             return socket.socket(fileno=options.listen_fd), parents
         text = options.listen or config.addresses.get(options.name)
@@ -84,13 +84,24 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
                                 f"(robots: {', '.join(scenario.names)})"[:200])
     setup = setups[options.name]
     listen, parents = resolve_addresses(scenario, config, options, setup)
+    failover = config.failover and options.mode == "realtime"
     peers = setup.parents + setup.children
+    if failover:   # any robot may become a peer
+        peers = tuple(n for n in scenario.names if n != options.name)
     keys = keys_from_file(options.keys, scenario.names, (options.name, *peers))
     plant = make_plant(setup, options.mode)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
-    links = make_links(scenario, options, setup, keys, listen, parents)
+    links = make_links(scenario, options, peers if failover else setup.children, keys, listen, parents)
+    handover = None
+    if failover:
+        addresses = {**config.addresses, **dict(options.connect)}
+
+        def relink(name: str) -> None:
+            if isinstance(links, RobotLinks) and name in addresses:
+                links.add_parent(name, split_address(addresses[name], f"address of {name}"))
+        handover = Failover(config.order, setups, config.failover_after, relink)
     program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
-                           LinkPlan(config.link, config.seed), config.watchdog)
+                           LinkPlan(config.link, config.seed), config.watchdog, handover)
     try:
         port = await links.start() if isinstance(links, RobotLinks) else None
         if announce is not None:
@@ -101,12 +112,12 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
     return program
 
 
-def make_links(scenario: Scenario, options: RobotOptions, setup, keys: dict, listen, parents: dict):
+def make_links(scenario: Scenario, options: RobotOptions, accepted, keys: dict, listen, parents: dict):
     """The robot's transport: ``RobotLinks`` over TCP, or a Zenoh peer listening on its
     endpoint (with followers) and connecting to its parents' (no link-level key: every frame
     is still authenticated by its envelope)."""
     if options.transport != "zenoh":
-        return RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, setup.children, parents,
+        return RobotLinks(options.name, {n: (k[1], k[2]) for n, k in keys.items()}, tuple(accepted), parents,
                           listen)
     try:
         from nonholo.comm.transports.zenoh import ZenohTransport, peer_config

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -69,6 +69,19 @@ class LinkPlan:
         return usable_instants(model, self.seed, parent, child, self.instants, period)
 
 
+@dataclass(frozen=True)
+class Failover:
+    """Leader failover (realtime): when the root ``order[0]`` has been silent ``after_s``,
+    ``order[1]`` tracks the reference with the root's law from where it stands and the
+    root's other followers follow it instead. ``setups``: every robot's setup by name;
+    ``relink(name)``: have the transport connect to robot ``name`` (None: already linked)."""
+
+    order: tuple[str, ...]
+    setups: dict
+    after_s: float = 0.3
+    relink: object = None
+
+
 def quantiles(values) -> dict:
     """p50, p99 and max of ``values`` (None when empty)."""
     values = np.asarray(values, dtype=float)
@@ -87,7 +100,8 @@ class RobotProgram:
 
     def __init__(self, setup: RobotSetup, plant, transport, channel: SecureChannel, limits: dict,
                  wait_s: float = DEFAULT_WAIT_S, links: LinkPlan | None = None,
-                 watchdog: WatchdogConfig | None = None) -> None:
+                 watchdog: WatchdogConfig | None = None, failover: Failover | None = None) -> None:
+        self.failover = failover
         self.setup, self.plant, self.transport, self.channel = setup, plant, transport, channel
         self.limits, self.wait_s = limits, wait_s
         self.watchdog = watchdog or WatchdogConfig()
@@ -344,6 +358,33 @@ class RobotProgram:
             receiver.cancel()
             await asyncio.gather(receiver, return_exceptions=True)
 
+    def _take_over(self, lost: str, now: float) -> None:
+        """Leader ``lost`` is gone (spec: failover): the successor becomes the root with its
+        law and reference; the other followers of ``lost`` follow the successor."""
+        f, s = self.failover, self.setup
+        successor = f.order[f.order.index(lost) + 1]
+        root = f.setups[lost]
+        self.inbox.pop(lost, None)
+        self.latest.pop(lost, None)
+        if s.name == successor:
+            others = tuple(c for c in root.children if c != s.name)
+            self.setup = replace(s, kind=ROOT, parents=(), children=s.children + others, law=root.law,
+                                 gains=root.gains, fields=root.fields.copy(), contract=root.contract, rows=root.rows)
+            self._root = root_step(root.law, root.gains, root.contract)
+            for child in others:
+                self.progress[child] = -1
+                self.heard[child] = now
+                self.drops[child] = np.zeros(len(self.ticks), dtype=bool)
+            self.events.append({"t": now - self.start_clock, "event": "took-over", "robot": lost, "at": now})
+        else:
+            self.setup = replace(s, parents=(successor,))
+            self.inbox[successor] = deque(maxlen=PARENT_STATES)
+            self.ages[successor] = np.full(len(self.ticks), np.nan)
+            self.latency[successor] = deque(maxlen=LATENCY_SAMPLES)
+            if f.relink is not None:
+                f.relink(successor)
+            self.events.append({"t": now - self.start_clock, "event": "new-parent", "robot": successor, "at": now})
+
     def _run_time(self) -> float:
         return self.clock() - self.start_clock if self.start_clock else 0.0
 
@@ -388,6 +429,13 @@ class RobotProgram:
                 if k % s.hold_every == 0:
                     instant = k // s.hold_every
                     self.ticks[instant] = now
+                    lost = self.failover.order[0] if self.failover else None
+                    if lost in s.parents and now - self.arrival.get(lost, start) > self.failover.after_s:
+                        self._take_over(lost, now)
+                        s = self.setup
+                        seen.update({p: -1 for p in s.parents})
+                        if s.kind == ROOT:
+                            xi = held[0]      # the dynamic-feedback law's ξ is the speed it holds
                     xi += held[kn.HELD_XI_DOT] * (now - last_control)
                     last_control = now
                     age, new = 0.0, False

@@ -119,7 +119,7 @@ def free_port() -> int:
 
 
 def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                          extra: dict | None = None, transport: str = "tcp") -> Robots:
+                          extra: dict | None = None, transport: str = "tcp", failover: tuple = ()) -> Robots:
     """Start every robot of ``scenario`` (read from ``source`` with ``overrides``) as its own
     process, writing ``NAME.npz`` traces to a new work directory; ``extra`` {name: [options]}.
     The caller must ``stop_all()`` (in a ``finally``) and remove the work directory."""
@@ -132,6 +132,8 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
         for robot in scenario.robots:
             for parent in robot.parents:
                 children[parent].append(robot.name)
+        for name in failover[1:2]:    # the successor may gain followers
+            children[name] = children[name] or ["(successor)"]
         for name, kids in children.items():
             if kids and transport == "zenoh":
                 robots.endpoints[name] = f"tcp/127.0.0.1:{free_port()}"
@@ -147,7 +149,8 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
             if transport == "zenoh":
                 options = ["--transport", "zenoh"] + [f"--connect={p}={robots.endpoints[p]}" for p in robot.parents]
             else:
-                options = [f"--connect={p}=127.0.0.1:{ports[p]}" for p in robot.parents]
+                linked = robot.parents if not failover else [n for n in ports if n != name]
+                options = [f"--connect={p}=127.0.0.1:{ports[p]}" for p in linked]
             fds = ()
             if name in robots.endpoints:
                 options += ["--listen", robots.endpoints[name]]
@@ -166,10 +169,11 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
 
 
 def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                        run_s: float, extra: dict | None = None, transport: str = "tcp") -> Path:
+                        run_s: float, extra: dict | None = None, transport: str = "tcp",
+                        failover: tuple = ()) -> Path:
     """Run every robot as its own process until all end (bounded by ``run_s``); the work
     directory holding the traces (the caller removes it). Every process is reaped."""
-    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra, transport)
+    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra, transport, failover)
     try:
         robots.wait(run_s)
         return robots.workdir
