@@ -19,6 +19,8 @@ def register(subparsers) -> None:
     parser.add_argument("--rates", type=float, nargs="+", default=[100, 200, 400, 800], metavar="HZ",
                         help="control rates to try (default: 100 200 400 800)")
     parser.add_argument("--duration", type=float, default=3.0, metavar="S", help="seconds per rate (default 3)")
+    parser.add_argument("--no-faults", action="store_true",
+                        help="skip the fault figures (leader SIGKILL and SIGSTOP: time to the followers' stop)")
     parser.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     parser.set_defaults(handler=handle)
 
@@ -30,6 +32,6 @@ def handle(args: argparse.Namespace) -> int:
         print("nonholo bench-fleet: --rates must be in 1..5000 Hz and --duration in 0.5..600 s", file=sys.stderr)
         return EXIT_BAD_INPUT
     progress = None if args.json else (lambda message: print(f"  {message}", file=sys.stderr, flush=True))
-    figures = run_bench(tuple(args.rates), args.duration, progress)
+    figures = run_bench(tuple(args.rates), args.duration, progress, not args.no_faults)
     print(json.dumps(figures) if args.json else format_bench(figures))
     return EXIT_OK

@@ -69,7 +69,61 @@ def sustained(figures: dict) -> bool:
             and figures["period_p99_ms"] <= 2 * period)
 
 
-def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None) -> dict:
+def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKILL") -> dict:
+    """Leader + 7 followers in realtime over TCP at 50 Hz; the leader is sent ``signal_name``
+    1 s into the run. Per follower: the time from the signal to its watchdog's stop and to
+    standstill (v and ω held at zero), in ms."""
+    import os
+    import shutil
+    import signal
+    import time
+
+    from nonholo.fleet.process import read_trace
+    from nonholo.fleet.spawn import start_robot_processes
+
+    path = folder / "faults.toml"
+    path.write_text(star_text().replace("duration = 2.0", f"duration = {duration!r}"))
+    scenario, _ = load_fleet(path)
+    scenario = with_overrides(scenario, dt=0.01, control_period=0.02)
+    overrides = {"dt": 0.01, "control_period": 0.02}
+    robots = start_robot_processes(path, scenario, None, overrides, 20.0,
+                                   extra={n: ["--mode", "realtime"] for n in scenario.names})
+    followers = scenario.names[1:]
+    try:
+        deadline = time.monotonic() + 30.0
+        while not all("running at" in (robots.workdir / f"{n}.err").read_text(errors="replace")
+                      for n in scenario.names):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the robots did not start within 30 s")
+            time.sleep(0.02)
+        time.sleep(1.0)
+        sig = getattr(signal, signal_name)
+        sent = time.monotonic()
+        os.killpg(robots.processes["leader"].pid, sig)
+        if sig == signal.SIGSTOP:
+            time.sleep(1.0)
+            os.killpg(robots.processes["leader"].pid, signal.SIGCONT)
+        robots.wait(duration + 30.0, allowed=frozenset({"leader"}))
+        stop_ms, still_ms = [], []
+        for name in followers:
+            _, helds, report = read_trace(robots.workdir / f"{name}.npz")
+            stops = [e for e in report["events"] if e["event"] == "stop" and e["at"] > sent]
+            if stops:
+                stop_ms.append(1e3 * (stops[0]["at"] - sent))
+                start = report["events"][0]["at"] - report["events"][0]["t"]
+                k = int((stops[0]["at"] - start) / scenario.dt)
+                zero = np.flatnonzero((helds[k:, 0] == 0) & (helds[k:, 1] == 0))
+                if zero.size:
+                    still_ms.append(1e3 * ((k + zero[0]) * scenario.dt + start - sent))
+    finally:
+        robots.stop_all()
+        shutil.rmtree(robots.workdir, ignore_errors=True)
+    return {"signal": signal_name, "followers": len(followers), "stopped": len(stop_ms),
+            "stop_ms_max": max(stop_ms) if stop_ms else None, "stop_ms_mean": float(np.mean(stop_ms)) if stop_ms else None,
+            "standstill_ms_max": float(max(still_ms)) if still_ms else None}
+
+
+def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None, faults: bool = True) -> dict:
     say = progress or (lambda message: None)
     figures = {}
     with tempfile.TemporaryDirectory(prefix="nonholo-bench-") as folder:
@@ -103,6 +157,11 @@ def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None) 
             network = _run(folder, "star", star_text(), "zenoh", "realtime", duration=duration, dt=0.01,
                            control_period=0.01)
             figures["realtime_zenoh_100hz"] = realtime_figures(network, 100)
+        if faults:
+            figures["faults"] = []
+            for name in ("SIGKILL", "SIGSTOP"):
+                say(f"realtime leader + {FOLLOWERS} followers at 50 Hz, leader sent {name}")
+                figures["faults"].append(fault_figures(folder, signal_name=name))
     return figures
 
 
@@ -116,6 +175,10 @@ def format_bench(figures: dict) -> str:
                      f"{t['latency_max_ms']:7.2f} {t['sent']:>6} {t['lost']:>5} {t['period_mean_ms']:7.3f} "
                      f"{t['period_p99_ms']:7.3f} {t['stops']:>5}  {'yes' if t['sustained'] else 'no'}")
     lines.append(f"highest sustained control rate of 8 processes: {figures['highest_sustained_hz']} Hz")
+    for fault in figures.get("faults", []):
+        lines.append(f"leader {fault['signal']}: {fault['stopped']} of {fault['followers']} followers stopped by "
+                     f"their watchdogs, at most {fault['stop_ms_max']:.0f} ms after the signal (mean "
+                     f"{fault['stop_ms_mean']:.0f} ms); standstill within {fault['standstill_ms_max']:.0f} ms")
     zenoh = figures.get("realtime_zenoh_100hz")
     if zenoh:
         lines.append(f"Zenoh at 100 Hz: latency p50 {zenoh['latency_p50_ms']:.3f} ms, p99 {zenoh['latency_p99_ms']:.3f} "
