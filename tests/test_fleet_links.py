@@ -140,3 +140,15 @@ def test_link_health_figure_and_network_table(tmp_path):
     assert "leader->follower" in text and max(len(line) for line in text.splitlines()) <= 100
     plot_link_health(run.timelines, run.network, tmp_path / "network.png")
     assert (tmp_path / "network.png").stat().st_size > 10_000
+
+
+def test_realtime_applies_the_link_delay_and_loss(tmp_path):
+    path = tmp_path / "two.toml"
+    path.write_text(example_text("formation-circle-switch", ("at = 100.0", "at = 0.5"))
+                    + "[network]\nseed = 2\ndelay = 0.03\njitter = 0.01\nloss = 0.2\n")
+    scenario, config = load_fleet(path)
+    run = run_fleet(with_overrides(scenario, **{**OVERRIDES, "duration": 1.0}), "inproc", "realtime", config=config)
+    link = run.network["links"]["leader->follower"]
+    assert link["lost_by_model"] > 0 and link["received"] > 0
+    assert 0.03 <= link["latency_s"]["p50"] and link["latency_s"]["max"] < 0.2
+    assert link["age_s"]["max"] < 0.2

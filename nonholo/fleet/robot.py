@@ -22,7 +22,7 @@ from nonholo.comm.channel import SecureChannel
 from nonholo.comm.errors import CommError
 from nonholo.errors import SimulationError
 from nonholo.fleet import messages as msg
-from nonholo.fleet.links import IDEAL, LOST, LinkModel, newest_usable, usable_instants
+from nonholo.fleet.links import IDEAL, LOST, LinkModel, link_draws, newest_usable, usable_instants
 from nonholo.fleet.setup import BEARING, PAIR, ROOT, RobotSetup
 from nonholo.fleet.step import follower_steps, plant_steps, root_step
 from nonholo.fleet.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
@@ -113,6 +113,12 @@ class RobotProgram:
         # never gets, and per parent the newest usable message at each instant.
         self.drops = {c: links.usable(setup.name, c, period) == LOST for c in setup.children}
         self.schedule = {p: newest_usable(links.usable(p, setup.name, period), instants) for p in setup.parents}
+        # Realtime: each state to a child leaves after its drawn delay (in order unless reorder).
+        self.delays = {c: link_draws(links.model(setup.name, c), links.seed, setup.name, c, instants)[0]
+                       for c in setup.children}
+        self.reorder = {c: links.model(setup.name, c).reorder for c in setup.children}
+        self._due: dict[str, float] = {}
+        self._delayed: set[asyncio.Task] = set()
         self.ages = {p: np.full(instants, np.nan) for p in setup.parents}
         self.events: list[dict] = []
         self.ticks = np.zeros(instants)
@@ -491,7 +497,9 @@ class RobotProgram:
             await self._wait(lambda: not self.subscribers, "cancel from every follower", bound=end_wait_s)
         finally:
             receiver.cancel()
-            await asyncio.gather(receiver, return_exceptions=True)
+            for task in self._delayed:
+                task.cancel()
+            await asyncio.gather(receiver, *self._delayed, return_exceptions=True)
 
     async def _publish(self, k: int, instant: int, x: float, y: float, theta: float, v: float,
                        omega: float, t: float | None = None) -> None:
@@ -505,9 +513,26 @@ class RobotProgram:
             if self.drops[child][instant]:
                 self.tally.lost[child] += 1   # the link model loses it on the way
                 continue
-            await self._send(child, msg.act("inform", self.setup.name, child,
-                                            msg.conversation(child, self.setup.name), content))
+            message = msg.act("inform", self.setup.name, child, msg.conversation(child, self.setup.name), content)
+            delay = self.delays[child][instant] if self.realtime and child in self.delays else 0.0
+            if delay > 0:
+                due = self.clock() + delay
+                if not self.reorder[child]:
+                    due = max(due, self._due.get(child, 0.0))
+                self._due[child] = due
+                task = asyncio.ensure_future(self._send_state_at(child, message, due))
+                self._delayed.add(task)
+                task.add_done_callback(self._delayed.discard)
+                continue
+            await self._send(child, message)
             self.tally.states_sent[child] += 1
+
+    async def _send_state_at(self, child: str, message, due: float) -> None:
+        """Send a state when its drawn delay is over (realtime link model; at most
+        delay/T of them wait per child, as delay + jitter ≤ 24 T)."""
+        await asyncio.sleep(max(0.0, due - self.clock()))
+        await self._send(child, message)
+        self.tally.states_sent[child] += 1
 
     def report(self) -> dict:
         """What this robot measured: per peer frames sent, received, rejected, lost by the
