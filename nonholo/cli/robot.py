@@ -52,6 +52,7 @@ def register(subparsers) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     from nonholo import examples
+    from nonholo.comm.errors import CommError
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.config import load_fleet
     from nonholo.fleet.process import RobotOptions, robot_main, with_overrides
@@ -81,7 +82,7 @@ def handle(args: argparse.Namespace) -> int:
     except NonholoInputError as exc:
         print(f"nonholo robot: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (SimulationError, OSError) as exc:
+    except (SimulationError, CommError, OSError) as exc:   # OSError: e.g. the listen address is taken
         print(f"nonholo robot: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     print(f"robot {args.name}: {len(program.setup.control_steps)} control steps in {program.elapsed_s:.3f} s",

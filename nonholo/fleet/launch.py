@@ -20,7 +20,7 @@ import numpy as np
 from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
 from nonholo.fleet.config import NetworkConfig
-from nonholo.fleet.keys import fleet_keys, robot_channel
+from nonholo.fleet.keys import fleet_keys, keys_from_file, robot_channel
 from nonholo.fleet.report import link_timelines
 from nonholo.fleet.process import make_plant, read_trace, run_program
 from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
@@ -75,6 +75,8 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     else:
         if source is None:
             raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
+        if config.keys is not None:   # a bad key file is bad input, found before any process starts
+            keys_from_file(config.keys, scenario.names, scenario.names)
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
         if mode == "realtime":
             run_s += scenario.duration
