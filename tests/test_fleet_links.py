@@ -70,9 +70,13 @@ def chain(tmp_path, network):
 
 
 def test_lockstep_honours_the_link_model_alike_in_process_and_over_tcp(tmp_path):
-    path, scenario, config = chain(tmp_path, "[network]\nseed = 11\ndelay = 0.02\njitter = 0.05\nloss = 0.1\n"
-                                             "stale_after = 0.1\n[[network.links]]\nparent = \"f3\"\n"
-                                             "child = \"f4\"\nloss = 0.5\n")
+    from nonholo.fleet.bench import chain_text
+
+    path = tmp_path / "chain.toml"
+    path.write_text(chain_text(3) + "[network]\nseed = 11\ndelay = 0.02\njitter = 0.05\nloss = 0.1\n"
+                    "stale_after = 0.1\n[[network.links]]\nparent = \"f2\"\nchild = \"f3\"\nloss = 0.5\n")
+    scenario, config = load_fleet(path)
+    scenario = with_overrides(scenario, **OVERRIDES)
     inproc = run_fleet(scenario, "inproc", config=config)
     tcp = run_fleet(scenario, "tcp", config=config, source=path, overrides=OVERRIDES)
     a, b = inproc.to_dict()["network"], tcp.to_dict()["network"]
@@ -91,7 +95,7 @@ def test_lockstep_honours_the_link_model_alike_in_process_and_over_tcp(tmp_path)
             assert b["links"][name][key] == link[key]
         ages = (np.arange(instants) - link_schedule(config.link(parent, child), 11, parent, child, instants, 0.02))
         assert link["age_s"]["max"] == pytest.approx(ages[ages <= np.arange(instants)].max() * 0.02)
-    events = [e["event"] for e in a["robots"]["f4"]["watchdog"]]
+    events = [e["event"] for e in a["robots"]["f3"]["watchdog"]]
     assert events[:2] == ["stop", "resume"]        # no state usable at t = 0: stopped, then follows
 
 

@@ -20,7 +20,8 @@ def register(subparsers) -> None:
         "robot", help="run one robot of a scenario as its own program (TCP)",
         description="Run robot NAME of a scenario: its simulated plant, its control law at the control "
                     "instants, its state published to its followers and subscriptions to its parents, "
-                    "over authenticated TCP links (lockstep: logical time). Addresses and the key file "
+                    "over authenticated TCP links or Zenoh, in lockstep (logical time) or realtime (the wall "
+                    "clock, with the watchdog). Addresses and the key file "
                     "come from the options or the scenario's [network] table; a robot with followers "
                     "listens, a follower connects to its parents and reconnects when a link drops. "
                     "`nonholo fleet` starts one such process per robot.",
