@@ -74,3 +74,24 @@ def test_zenoh_lockstep_equals_centralized_sampled_data(tmp_path):
     run = run_fleet(scenario, transport="zenoh", config=config, source=path, overrides=overrides, wait_s=15.0)
     assert_same_result(simulate(scenario), run.result)
     assert run.network["transport"] == "zenoh"
+
+
+def test_a_failing_robot_fails_the_run_and_every_process_is_reaped(tmp_path, monkeypatch):
+    from nonholo.fleet import spawn
+    from nonholo.fleet.bench import chain_text
+
+    path = tmp_path / "chain.toml"
+    path.write_text(chain_text(2))
+    scenario, _ = load_fleet(path)
+    started = []
+    original = spawn.Robots.start
+
+    def record(robots, name):
+        started.append(original(robots, name))
+        return started[-1]
+
+    monkeypatch.setattr(spawn.Robots, "start", record)
+    with pytest.raises(spawn.LaunchError, match="robot f2 failed"):
+        spawn.run_robot_processes(path, scenario, None, OVERRIDES, 10.0, 30.0,
+                                  extra={"f2": ["--connect", "ghost=127.0.0.1:1"]})
+    assert len(started) == 3 and all(p.returncode is not None for p in started)
