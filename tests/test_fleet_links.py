@@ -9,7 +9,6 @@ import pytest
 
 from nonholo.comm.envelope import Sealer
 from nonholo.comm.transports.inproc import InProcNetwork
-from nonholo.fleet import messages as msg
 from nonholo.fleet.config import NetworkConfig, load_fleet
 from nonholo.fleet.keys import fleet_keys
 from nonholo.fleet.launch import inproc_programs, run_fleet, run_programs

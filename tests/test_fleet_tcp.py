@@ -1,6 +1,5 @@
 """A lockstep fleet of one OS process per robot over authenticated TCP equals the
 centralized sampled-data run (spec fleet.md §6), and bad network input is one line, exit 2."""
-import math
 
 import pytest
 
