@@ -175,10 +175,13 @@ def format_bench(figures: dict) -> str:
                      f"{t['latency_max_ms']:7.2f} {t['sent']:>6} {t['lost']:>5} {t['period_mean_ms']:7.3f} "
                      f"{t['period_p99_ms']:7.3f} {t['stops']:>5}  {'yes' if t['sustained'] else 'no'}")
     lines.append(f"highest sustained control rate of 8 processes: {figures['highest_sustained_hz']} Hz")
+    def ms(value):
+        return "-" if value is None else f"{value:.0f}"
+
     for fault in figures.get("faults", []):
         lines.append(f"leader {fault['signal']}: {fault['stopped']} of {fault['followers']} followers stopped by "
-                     f"their watchdogs, at most {fault['stop_ms_max']:.0f} ms after the signal (mean "
-                     f"{fault['stop_ms_mean']:.0f} ms); standstill within {fault['standstill_ms_max']:.0f} ms")
+                     f"their watchdogs, at most {ms(fault['stop_ms_max'])} ms after the signal (mean "
+                     f"{ms(fault['stop_ms_mean'])} ms); standstill within {ms(fault['standstill_ms_max'])} ms")
     zenoh = figures.get("realtime_zenoh_100hz")
     if zenoh:
         lines.append(f"Zenoh at 100 Hz: latency p50 {zenoh['latency_p50_ms']:.3f} ms, p99 {zenoh['latency_p99_ms']:.3f} "
