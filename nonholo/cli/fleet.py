@@ -27,7 +27,8 @@ def register(subparsers) -> None:
                              "realtime: the wall clock at the control rate, with the watchdog")
     add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv, plot.png and network.png (link health) to DIR")
+    parser.add_argument("--out", metavar="DIR",
+                        help="write result.json, trajectories.csv, plot.png and network.png (link health) to DIR")
     parser.set_defaults(handler=handle)
 
 

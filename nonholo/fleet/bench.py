@@ -119,7 +119,8 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
         robots.stop_all()
         shutil.rmtree(robots.workdir, ignore_errors=True)
     return {"signal": signal_name, "followers": len(followers), "stopped": len(stop_ms),
-            "stop_ms_max": max(stop_ms) if stop_ms else None, "stop_ms_mean": float(np.mean(stop_ms)) if stop_ms else None,
+            "stop_ms_max": max(stop_ms) if stop_ms else None,
+            "stop_ms_mean": float(np.mean(stop_ms)) if stop_ms else None,
             "standstill_ms_max": float(max(still_ms)) if still_ms else None}
 
 
@@ -184,6 +185,6 @@ def format_bench(figures: dict) -> str:
                      f"{ms(fault['stop_ms_mean'])} ms); standstill within {ms(fault['standstill_ms_max'])} ms")
     zenoh = figures.get("realtime_zenoh_100hz")
     if zenoh:
-        lines.append(f"Zenoh at 100 Hz: latency p50 {zenoh['latency_p50_ms']:.3f} ms, p99 {zenoh['latency_p99_ms']:.3f} "
-                     f"ms, {zenoh['lost']} of {zenoh['sent']} states lost, {zenoh['stops']} watchdog stops")
+        lines.append(f"Zenoh at 100 Hz: latency p50 {zenoh['latency_p50_ms']:.3f} ms, "
+                     f"p99 {zenoh['latency_p99_ms']:.3f} ms, {zenoh['lost']} of {zenoh['sent']} states lost, {zenoh['stops']} watchdog stops")
     return "\n".join(lines)

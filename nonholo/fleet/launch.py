@@ -131,8 +131,9 @@ async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode:
 
 def network_report(reports: list[dict], transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
     """Per link (parent → child): states sent, received, lost (by the link model or on the
-    way), frames rejected (and all frames sent and accepted), and the age of the parent's state used at each control instant; per
-    robot its watchdog events and control-loop period."""
+    way), frames rejected (and all frames sent and accepted), one-way latency and the age of
+    the parent's state used at each control instant; per robot its watchdog events and
+    control-loop period."""
     links = {}
     by_name = {r["name"]: r for r in reports}
     for sender in reports:

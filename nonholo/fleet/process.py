@@ -102,6 +102,7 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
         handover = Failover(config.order, setups, config.failover_after, relink)
     program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
                            LinkPlan(config.link, config.seed), config.watchdog, handover)
+    program.on_event = log_event
     try:
         port = await links.start() if isinstance(links, RobotLinks) else None
         if announce is not None:
@@ -124,6 +125,12 @@ def make_links(scenario: Scenario, options: RobotOptions, accepted, keys: dict, 
     except ImportError:
         raise NonholoInputError("transport zenoh: install the extra nonholo[zenoh]") from None
     return ZenohTransport(options.name, scenario.name, peer_config([listen] if listen else [], list(parents.values())))
+
+
+def log_event(name: str, event: dict) -> None:
+    """One stderr line per watchdog or link event, as it happens."""
+    about = f" {event['robot']}" if "robot" in event else ""
+    print(f"robot {name}: {event['event']}{about} at t = {event['t']:.3f} s", file=sys.stderr, flush=True)
 
 
 def announce_running(name: str):

@@ -121,6 +121,7 @@ class RobotProgram:
         self._delayed: set[asyncio.Task] = set()
         self.ages = {p: np.full(instants, np.nan) for p in setup.parents}
         self.events: list[dict] = []
+        self.on_event = None          # on_event(robot name, event dict), e.g. to log it
         self.ticks = np.zeros(instants)
         self.clock = time.monotonic
         self.realtime = False
@@ -196,7 +197,7 @@ class RobotProgram:
                 self.parent_epoch[sender] = epoch
                 queue.clear()
                 self.latest.pop(sender, None)
-                self.events.append({"t": self._run_time(), "event": "parent-restarted", "robot": sender})
+                self._event({"t": self._run_time(), "event": "parent-restarted", "robot": sender})
             self.tally.states_received[sender] += 1
             if not queue or state.k > queue[-1].k:
                 queue.append(state)
@@ -337,7 +338,8 @@ class RobotProgram:
                         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
                                                                command[1], period)
                         if event is not None:
-                            self.events.append({"t": instant * period, "event": event, "age": age if age != float("inf") else None})
+                            self._event({"t": instant * period, "event": event,
+                                         "age": age if age != float("inf") else None})
                         if guard.mode != FOLLOWING:
                             command = (v, omega, 0.0, 0.0, 0.0, 0.0)
                     held = command
@@ -381,7 +383,7 @@ class RobotProgram:
                 self.progress[child] = -1
                 self.heard[child] = now
                 self.drops[child] = np.zeros(len(self.ticks), dtype=bool)
-            self.events.append({"t": now - self.start_clock, "event": "took-over", "robot": lost, "at": now})
+            self._event({"t": now - self.start_clock, "event": "took-over", "robot": lost, "at": now})
         else:
             self.setup = replace(s, parents=(successor,))
             self.inbox[successor] = deque(maxlen=PARENT_STATES)
@@ -389,7 +391,13 @@ class RobotProgram:
             self.latency[successor] = deque(maxlen=LATENCY_SAMPLES)
             if f.relink is not None:
                 f.relink(successor)
-            self.events.append({"t": now - self.start_clock, "event": "new-parent", "robot": successor, "at": now})
+            self._event({"t": now - self.start_clock, "event": "new-parent", "robot": successor, "at": now})
+
+    def _event(self, event: dict) -> None:
+        """Record a watchdog or link event (and tell ``on_event``, if set, at once)."""
+        self.events.append(event)
+        if self.on_event is not None:
+            self.on_event(self.setup.name, event)
 
     def _run_time(self) -> float:
         return self.clock() - self.start_clock if self.start_clock else 0.0
@@ -474,7 +482,8 @@ class RobotProgram:
                         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
                                                                command[1], period)
                         if event is not None:
-                            self.events.append({"t": now - start, "event": event, "age": age if age != float("inf") else None, "at": now})
+                            self._event({"t": now - start, "event": event,
+                                         "age": age if age != float("inf") else None, "at": now})
                         if guard.mode != FOLLOWING:
                             command = (v, omega, 0.0, 0.0, 0.0, 0.0)
                     held = command
@@ -487,7 +496,7 @@ class RobotProgram:
                     for child in sorted(self.subscribers):
                         if now - self.heard.get(child, now) > SUBSCRIBER_LOST_S:
                             self.subscribers.discard(child)
-                            self.events.append({"t": now - start, "event": "lost-subscriber", "robot": child,
+                            self._event({"t": now - start, "event": "lost-subscriber", "robot": child,
                                                 "at": now})
                 self.states[k] = x, y, theta, xi
                 self.helds[k] = held
@@ -547,7 +556,8 @@ class RobotProgram:
                 "ages": {p: [float(a) for a in ages[~np.isnan(ages)]] for p, ages in self.ages.items()},
                 "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
                                   for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
-                "latency": {p: list(samples) for p, samples in self.latency.items()}, "events": list(self.events), "transport": self.transport.stats(),
+                "latency": {p: list(samples) for p, samples in self.latency.items()},
+                "events": list(self.events), "transport": self.transport.stats(),
                 "period": {"mean": float(periods.mean()) if periods.size else None,
                            "std": float(periods.std()) if periods.size else None,
                            "p99": float(np.percentile(periods, 99)) if periods.size else None,
