@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli.robot import add_simulation_overrides
 
 
 def register(subparsers) -> None:
@@ -17,14 +18,17 @@ def register(subparsers) -> None:
                     "section. Needs sampled-data control ([simulation] control_period).",
         epilog="Exit codes: 0 ok, 1 failure, 2 bad input.")
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
-    parser.add_argument("--transport", choices=("inproc",), default="inproc",
-                        help="inproc: every robot in this process (TCP processes: not yet)")
-    parser.add_argument("--mode", choices=("lockstep",), default="lockstep",
-                        help="lockstep: logical time, equal to the centralized sampled-data run")
-    parser.add_argument("--control-period", type=float, metavar="S",
-                        help="override [simulation] control_period (a multiple of dt)")
+    parser.add_argument("--transport", choices=("tcp", "zenoh", "inproc"),
+                        help="tcp: one process per robot over authenticated TCP (default, or [network] "
+                             "transport); zenoh: one process per robot, Zenoh peers; inproc: every robot in "
+                             "this process")
+    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                        help="lockstep: logical time, equal to the centralized sampled-data run; "
+                             "realtime: the wall clock at the control rate, with the watchdog")
+    add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    parser.add_argument("--out", metavar="DIR", help="write result.json, trajectories.csv and plot.png to DIR")
+    parser.add_argument("--out", metavar="DIR",
+                        help="write result.json, trajectories.csv, plot.png and network.png (link health) to DIR")
     from nonholo.cli.view import add_fleet_view_arguments
 
     add_fleet_view_arguments(parser)
@@ -32,23 +36,26 @@ def register(subparsers) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from nonholo import examples
     from nonholo.cli.run import format_summary, write_outputs
     from nonholo.cli.view import FleetViewing
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.launch import run_fleet
-    from nonholo.sim.files import load_scenario
+    from nonholo.fleet.report import format_network, plot_link_health
+    from nonholo.fleet.config import load_fleet
+    from nonholo.fleet.process import with_overrides
 
     viewing = FleetViewing(args, "nonholo fleet")
     try:
-        scenario = load_scenario(examples.resolve(args.scenario))
-        if args.control_period is not None:
-            scenario = dataclasses.replace(scenario, control_period=args.control_period, steps=None)
+        source = examples.resolve(args.scenario)
+        scenario, config = load_fleet(source)
+        overrides = {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
+        scenario = with_overrides(scenario, **overrides)
+        watched = viewing.speed is not None
+        transport = args.transport or ("inproc" if watched else config.transport)   # a live view watches in process
         viewing.start()
-        run = run_fleet(scenario, transport=args.transport, mode=args.mode, observer=viewing.observer,
-                        speed=viewing.speed)
+        run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
+                        overrides=overrides, observer=viewing.observer, speed=viewing.speed)
     except NonholoInputError as exc:
         viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
@@ -65,6 +72,8 @@ def handle(args: argparse.Namespace) -> int:
         if args.out:
             for written in write_outputs(run.result, summary, Path(args.out)):
                 print(f"wrote {written}", file=sys.stderr)
+            plot_link_health(run.timelines, summary["network"], Path(args.out) / "network.png")
+            print(f"wrote {Path(args.out) / 'network.png'}", file=sys.stderr)
         viewing.finish(run, summary)
     except NonholoInputError as exc:
         viewing.stop()
@@ -79,9 +88,7 @@ def handle(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(format_summary(summary))
-        network = summary["network"]
-        print(f"network: {network['transport']} {network['mode']}, {network['control_steps']} control steps, "
-              f"{network['control_steps_per_s']:.0f} steps/s")
+        print(format_network(summary["network"]))
     sys.stdout.flush()
     viewing.serve()
     return EXIT_OK

@@ -4,9 +4,17 @@ Layers, each importing only those above it::
 
     step      compiled per-robot steps: the kernel's own command and RK4 functions
     setup     what one robot needs from a scenario (its law, parents, plan, tables)
-    plant     the plant interface (read pose, command v and ω) and the simulated unicycle
+    plant     the plant interface (read pose, command v and ω) and the simulated unicycles
     messages  the robot-state content of the ``leader-follower-v1`` ontology
-    links     a robot's authenticated links to its parents and children (comm layers)
-    robot     the robot program: subscribe, control loop, publish
+    links     the link model: one seeded draw of delays and losses (pure)
+    watchdog  the follower's watchdog (pure state machine)
+    config    the scenario's ``[network]`` table
+    keys      a fleet's keys (one per robot) and a robot's secure channel
+    mesh      a robot's authenticated TCP links to its parents and children (comm layers)
+    robot     the robot program: subscribe, control loop (lockstep, realtime), publish
+    process   one robot program as its own OS process (``nonholo robot``)
+    spawn     one process per robot, every process reaped
+    report    the link-health figure and the network table
     launch    start every robot of a scenario and gather one result
+    bench     fleet figures (``nonholo bench-fleet``)
 """

@@ -1,33 +1,37 @@
 """Start every robot of a scenario and gather one result (``nonholo fleet``).
 
-``inproc``: every robot program in this process on one event loop, frames through the
-in-process transport (deterministic; for tests and for lockstep figures). The result is
-the simulator's own ``SimulationResult``, scored from the robots' trajectories and held
-commands by the kernel's statistics code, plus a ``network`` section.
+``tcp`` (default): one ``nonholo robot`` process per robot on this machine, each robot with
+followers serving them over authenticated TCP (``nonholo.fleet.spawn``, ``mesh``); there
+is no central hub. ``inproc``: every robot program in this process on one event loop,
+frames through the in-process transport (deterministic; for tests and for lockstep
+figures). The result is the simulator's own ``SimulationResult``, scored from the robots'
+trajectories and held commands by the kernel's statistics code, plus a ``network`` section.
 """
 from __future__ import annotations
 
 import asyncio
-import secrets
+import shutil
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from nonholo.comm.channel import SecureChannel
-from nonholo.comm.envelope import Opener, Sealer
 from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
-from nonholo.fleet.plant import SimulatedUnicycle
-from nonholo.fleet.robot import RobotProgram
+from nonholo.fleet.config import NetworkConfig
+from nonholo.fleet.keys import fleet_keys, keys_from_file, robot_channel
+from nonholo.fleet.report import link_timelines
+from nonholo.fleet.process import make_plant, read_trace, run_program
+from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
+from nonholo.fleet.spawn import run_robot_processes
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
-TRANSPORTS = ("inproc",)
-MODES = ("lockstep",)
-KEY_BYTES = 32
+TRANSPORTS = ("tcp", "zenoh", "inproc")
+MODES = ("lockstep", "realtime")
 
 
 @dataclass
@@ -36,6 +40,7 @@ class FleetRun:
 
     result: object
     network: dict
+    timelines: dict | None = None   # per link the age of the state used over time; events (not in JSON)
 
     def to_dict(self) -> dict:
         summary = self.result.to_dict()
@@ -43,63 +48,90 @@ class FleetRun:
         return summary
 
 
-def fleet_keys(names) -> dict[str, tuple[int, int, bytes]]:
-    """Per robot (sender id, key id, secret): one key per sender (spec comm.md §3.1)."""
-    return {name: (i + 1, i + 1, secrets.token_bytes(KEY_BYTES)) for i, name in enumerate(names)}
+def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep", wait_s: float = 20.0,
+              config: NetworkConfig | None = None, source: Path | None = None,
+              overrides: dict | None = None, observer=None, speed: float | None = None) -> FleetRun:
+    """Run ``scenario`` as a fleet. Robot processes (``tcp``) read the scenario from the
+    file ``source`` with ``overrides`` ({"duration", "dt", "control_period"}) applied, which
+    must give ``scenario``.
 
-
-def robot_channel(name: str, peers, keys: dict) -> SecureChannel:
-    """Seals with ``name``'s key; opens only ``peers``' frames, each bound to its name."""
-    sender_id, key_id, secret = keys[name]
-    opener = Opener({keys[p][1]: keys[p][2] for p in peers},
-                    key_senders={keys[p][1]: frozenset({keys[p][0]}) for p in peers}, max_age_ms=60_000)
-    return SecureChannel(Sealer(secret, key_id=key_id, sender_id=sender_id), opener,
-                         senders={keys[p][0]: p for p in peers})
-
-
-def run_fleet(scenario: Scenario, transport: str = "inproc", mode: str = "lockstep",
-              wait_s: float = 20.0, observer=None, speed: float | None = None) -> FleetRun:
-    """Run the fleet. ``observer``: a callable given the robot programs every
+    In process only (``inproc``): ``observer``, a callable given the robot programs every
     ``observer.period_s`` s of wall time while they run and once at the end (it must not
     block: a live view publishes a snapshot), whose ``prepare(scenario, setups)``, if any, is
-    called before the robots start; ``speed``: pace the logical time at this many
-    times wall time (None: as fast as the robots go)."""
+    called before the robots start; ``speed``: pace the logical time at this many times wall
+    time (None: as fast as the robots go)."""
     if transport not in TRANSPORTS:
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
         raise NonholoInputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    if (observer is not None or speed) and transport != "inproc":
+        raise NonholoInputError(f"a live view watches robot programs in this process: use --transport inproc, "
+                                f"not {transport}")
+    config = config or NetworkConfig(transport=transport)
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
     started = time.perf_counter()
-    if observer is not None and hasattr(observer, "prepare"):
-        observer.prepare(scenario, setups)
-    programs = asyncio.run(_inproc_lockstep(scenario, setups, wait_s, observer, speed))
-    elapsed = time.perf_counter() - started
     n = scenario.n_steps + 1
     states = np.zeros((n, 4, len(scenario.robots)))
     helds = np.zeros((n, kn.HELD_COUNT, len(scenario.robots)))
-    for program in programs:
-        states[:, :, program.setup.index] = program.states
-        helds[:, :, program.setup.index] = program.helds
+    index = {name: i for i, name in enumerate(scenario.names)}
+    reports = []
+    if transport == "inproc":
+        if observer is not None and hasattr(observer, "prepare"):
+            observer.prepare(scenario, setups)
+        for program in asyncio.run(_inproc(scenario, setups, config, mode, wait_s, observer, speed)):
+            states[:, :, program.setup.index] = program.states
+            helds[:, :, program.setup.index] = program.helds
+            reports.append(program.report())
+    else:
+        if source is None:
+            raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
+        if config.keys is not None:   # a bad key file is bad input, found before any process starts
+            keys_from_file(config.keys, scenario.names, scenario.names)
+        run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
+        if mode == "realtime":
+            run_s += scenario.duration
+        workdir = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
+                                     extra={name: ["--mode", mode] for name in scenario.names},
+                                     transport=transport,
+                                     failover=config.order if config.failover and mode == "realtime" else ())
+        try:
+            for name in scenario.names:
+                robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")
+                states[:, :, index[name]] = robot_states
+                helds[:, :, index[name]] = robot_helds
+                reports.append(report)
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+    elapsed = time.perf_counter() - started
     result = score_states(scenario, planned, states, helds, elapsed)
-    return FleetRun(result, network_report(programs, transport, mode, elapsed, scenario))
+    network = network_report(reports, transport, mode, elapsed, scenario)
+    network["stale_after"] = config.watchdog.stale_after
+    return FleetRun(result, network, link_timelines(reports))
 
 
-async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float, observer=None,
-                           speed: float | None = None) -> list[RobotProgram]:
-    network = InProcNetwork()
-    keys = fleet_keys(scenario.names)
+def inproc_programs(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str, wait_s: float,
+                    network: InProcNetwork, keys: dict | None = None) -> list[RobotProgram]:
+    """Every robot program of ``scenario`` on the in-process ``network`` (fresh keys unless given)."""
+    keys = keys or fleet_keys(scenario.names)
     limits = {r.name: (r.v_max, r.omega_max) for r in scenario.robots}
     programs = []
     for name, setup in setups.items():
-        plant = SimulatedUnicycle(setup.start, setup.dt, setup.plan, setup.contract)
         channel = robot_channel(name, setup.parents + setup.children, keys)
-        programs.append(RobotProgram(setup, plant, network.endpoint(name), channel, limits, wait_s))
+        programs.append(RobotProgram(setup, make_plant(setup, mode), network.endpoint(name), channel, limits, wait_s,
+                                     LinkPlan(config.link, config.seed), config.watchdog))
+    return programs
+
+
+async def run_programs(programs: list[RobotProgram], mode: str, config: NetworkConfig, observer=None,
+                       speed: float | None = None) -> list[RobotProgram]:
+    """Run programs on this event loop until all end; the first failure cancels the rest.
+    ``observer`` and ``speed``: see ``run_fleet``."""
     if speed:
-        clock = paced_clock(speed)
+        pace = paced_clock(speed)
         for program in programs:
-            program.clock = clock
-    tasks = [asyncio.ensure_future(p.run_lockstep()) for p in programs]
+            program.pace = pace
+    tasks = [asyncio.ensure_future(run_program(p, mode, config)) for p in programs]
     if observer is not None:
         tasks.append(asyncio.ensure_future(_observe(observer, programs)))
     try:
@@ -111,6 +143,12 @@ async def _inproc_lockstep(scenario: Scenario, setups: dict, wait_s: float, obse
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
     return programs
+
+
+async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode: str, wait_s: float, observer=None,
+                  speed: float | None = None) -> list[RobotProgram]:
+    return await run_programs(inproc_programs(scenario, setups, config, mode, wait_s, InProcNetwork()), mode, config,
+                              observer, speed)
 
 
 def paced_clock(speed: float):
@@ -133,21 +171,29 @@ async def _observe(observer, programs) -> None:
         await asyncio.sleep(observer.period_s)
 
 
-def network_report(programs, transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
-    """Per link (parent → child): frames sent, received, rejected; per robot its loop figures."""
+def network_report(reports: list[dict], transport: str, mode: str, elapsed: float, scenario: Scenario) -> dict:
+    """Per link (parent → child): states sent, received, lost (by the link model or on the
+    way), frames rejected (and all frames sent and accepted), one-way latency and the age of
+    the parent's state used at each control instant; per robot its watchdog events and
+    control-loop period."""
     links = {}
-    by_name = {p.setup.name: p for p in programs}
-    for program in programs:
-        for child in program.setup.children:
+    by_name = {r["name"]: r for r in reports}
+    for sender in reports:
+        name = sender["name"]
+        for child in sender["children"]:
             receiver = by_name[child]
-            name = program.setup.name
-            links[f"{name}->{child}"] = {"sent": program.tally.sent[child], "received": receiver.tally.received[name],
-                                         "lost": program.tally.sent[child] - receiver.tally.received[name]
-                                         - receiver.tally.rejected[name],
-                                         "rejected": receiver.tally.rejected[name]}
+            sent, dropped = sender["states_sent"].get(child, 0), sender["lost"].get(child, 0)
+            received, rejected = receiver["states_received"].get(name, 0), receiver["rejected"].get(name, 0)
+            links[f"{name}->{child}"] = {
+                "sent": sent, "received": received, "lost": dropped + max(sent - received, 0),
+                "lost_by_model": dropped, "rejected": rejected, "frames_sent": sender["sent"].get(child, 0),
+                "frames_received": receiver["received"].get(name, 0),
+                "latency_s": quantiles(receiver["latency"].get(name, [])),
+                "age_s": quantiles(receiver["ages"].get(name, []))}
     instants = len(range(0, scenario.n_steps + 1, scenario.hold_every))
+    loop = max((r["loop_s"] for r in reports), default=0.0)   # the slowest robot's control loop
     return {"transport": transport, "mode": mode, "control_period": scenario.control_period,
-            "elapsed_s": elapsed, "control_steps": instants,
-            "control_steps_per_s": instants / elapsed if elapsed > 0 else None, "links": links,
-            "robots": {p.setup.name: {"parents": list(p.setup.parents), "children": list(p.setup.children),
-                                      "loop_s": p.elapsed_s} for p in programs}}
+            "elapsed_s": elapsed, "control_steps": instants, "loop_s": loop,
+            "control_steps_per_s": instants / loop if loop > 0 else None, "links": links,
+            "robots": {r["name"]: {"parents": r["parents"], "children": r["children"], "loop_s": r["loop_s"],
+                                   "watchdog": r["events"], "period_s": r["period"]} for r in reports}}

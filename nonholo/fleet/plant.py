@@ -8,7 +8,9 @@ over output step k on logical time; a real plant moves by itself.
 """
 from __future__ import annotations
 
-from typing import Protocol
+import math
+import time
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -41,3 +43,39 @@ class SimulatedUnicycle:
 
     def advance(self, k: int) -> None:
         self._hold(self._pose, self.v, self.omega, self.dt, int(self.plan[k]))
+
+
+def unicycle_arc(x: float, y: float, theta: float, v: float, omega: float,
+                 h: float) -> tuple[float, float, float]:
+    """The unicycle's exact pose after ``h`` seconds under constant (v, ω): an arc, or a
+    segment when ω is (almost) zero."""
+    if abs(omega * h) < 1e-9:
+        mid = theta + 0.5 * omega * h
+        return x + v * h * math.cos(mid), y + v * h * math.sin(mid), theta + omega * h
+    turned = theta + omega * h
+    radius = v / omega
+    return x + radius * (math.sin(turned) - math.sin(theta)), y - radius * (math.cos(turned) - math.cos(theta)), turned
+
+
+class WallClockUnicycle:
+    """The simulated unicycle on the wall clock (realtime runs): it moves by itself, as a
+    real robot does, along the exact arc of the command it holds; ``pose()`` is its pose now."""
+
+    def __init__(self, pose, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._pose = tuple(float(p) for p in pose[:3])
+        self._since = clock()
+        self.v = self.omega = 0.0
+
+    def _catch_up(self) -> None:
+        now = self._clock()
+        self._pose = unicycle_arc(*self._pose, self.v, self.omega, now - self._since)
+        self._since = now
+
+    def pose(self) -> tuple[float, float, float]:
+        self._catch_up()
+        return self._pose
+
+    def command(self, v: float, omega: float) -> None:
+        self._catch_up()
+        self.v, self.omega = float(v), float(omega)

@@ -308,7 +308,8 @@ class _Reader:
         return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
 
     def scenario(self, data, name: str) -> Scenario:
-        data = self.table(data, "", {"simulation", "reference", "robots", "name", "formation"})
+        # [network] belongs to the fleet (nonholo.fleet.config reads it); the simulator ignores it.
+        data = self.table(data, "", {"simulation", "reference", "robots", "name", "formation", "network"})
         simulation = self.table(data.get("simulation", {}), "simulation", SIMULATION_FIELDS)
         options = self.table(data.get("formation", {}), "formation", FORMATION_FIELDS)
         reference = self.reference(data["reference"]) if "reference" in data else None

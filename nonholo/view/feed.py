@@ -62,6 +62,11 @@ class LatestFeed:
             return self._final if self._final is not None else self._setup
 
 
+def _newest(samples):
+    """The newest of a program's latency samples (realtime runs measure them), or None."""
+    return samples[-1] if samples else None
+
+
 def _number(value) -> float | None:
     return None if value is None or not math.isfinite(value) else round(float(value), 6)
 
@@ -122,9 +127,9 @@ def fleet_snapshot(programs, started: float) -> dict:
         v, omega = (float(program.helds[k, 0]), float(program.helds[k, 1])) if k >= 0 else (0.0, 0.0)
         robots[s.name] = {"x": x, "y": y, "theta": theta, "v": v, "omega": omega, "k": k}
         t = max(t, k * s.dt)
-        watchdog = getattr(program, "watchdog", None)
-        states[s.name] = str(getattr(watchdog, "state", watchdog)) if watchdog is not None else \
-            ("done" if k >= s.n_steps else ("running" if k >= 0 else "starting"))
+        guard = getattr(program, "guard", None)   # the watchdog's state (nonholo.fleet.watchdog)
+        stopping = guard is not None and s.parents and guard.mode != "following"
+        states[s.name] = "stopping" if stopping else ("done" if k >= s.n_steps else ("running" if k >= 0 else "starting"))
         if not s.parents:
             continue
         errors = (None, None)
@@ -148,8 +153,7 @@ def fleet_snapshot(programs, started: float) -> dict:
             links[f"{parent}->{s.name}"] = {
                 "e1": _number(errors[0]), "e2": _number(errors[1]),
                 "age_s": _number((k - newest.k) * s.dt) if newest is not None and k >= 0 else None,
-                "latency_s": _number(getattr(program, "latency_s", {}).get(parent)) if hasattr(program, "latency_s")
-                else None,
+                "latency_s": _number(_newest(getattr(program, "latency", {}).get(parent))),
                 "sent": sent, "received": received, "rejected": program.tally.rejected[parent],
                 "in_flight": max(0, sent - received - program.tally.rejected[parent])}
     return {"t": round(t, 6), "wall_s": round(time.monotonic() - started, 3), "robots": robots, "links": links,

@@ -5,6 +5,7 @@ hub knows learns nothing and is closed (see ``transports.stream`` for every limi
 from __future__ import annotations
 
 import asyncio
+import socket
 
 from nonholo.comm.transports.base import DEFAULT_MAX_FRAME
 from nonholo.comm.transports.hello import LinkAuth
@@ -13,11 +14,14 @@ from nonholo.comm.transports.stream import DEFAULT_LIMITS, StreamClient, StreamL
 
 async def serve_tcp(name: str, host: str = "127.0.0.1", port: int = 0,
                     max_frame: int = DEFAULT_MAX_FRAME, *, auth: LinkAuth,
-                    limits: StreamLimits = DEFAULT_LIMITS) -> StreamServer:
-    """Listen on ``host:port`` (port 0 picks a free one: read ``tcp_port(server)``)."""
+                    limits: StreamLimits = DEFAULT_LIMITS,
+                    sock: socket.socket | None = None) -> StreamServer:
+    """Listen on ``host:port`` (port 0 picks a free one: read ``tcp_port(server)``), or
+    on ``sock``, a listening socket made by someone else (``host`` and ``port`` unused)."""
     hub = StreamServer(name, max_frame, auth=auth, limits=limits)
     # The kernel's accept queue is bounded too: beyond it the kernel refuses connections.
-    hub.server = await asyncio.start_server(hub.handle_connection, host, port,
+    where = {"sock": sock} if sock is not None else {"host": host, "port": port}
+    hub.server = await asyncio.start_server(hub.handle_connection, **where,
                                             backlog=limits.max_peers + limits.max_pending)
     return hub
 

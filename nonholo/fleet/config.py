@@ -1,0 +1,182 @@
+"""The ``[network]`` table of a scenario: how a fleet's robots reach each other, their
+keys, the link model (spec fleet.md §3–4) and the watchdog (§5).
+
+    [network]
+    transport = "tcp"              # tcp | zenoh | inproc
+    keys = "fleet.keys"            # key file (mode 0600): key id i+1 is robot i's key
+    seed = 7                       # the link model's seed
+    delay = 0.0                    # link defaults: fixed delay (s), jitter (s), loss
+    jitter = 0.0
+    loss = 0.0
+    stale_after = 0.1              # watchdog (s); resume_after fresh states; decelerations
+    resume_after = 3
+    decel_v = 2.0
+    decel_omega = 8.0
+    predict = false                # realtime: extrapolate the parent's state over its age
+    failover = false               # realtime: the leader's successor takes over when it is lost
+    order = ["leader", "f1"]       # the leader, then its successor (a direct l-phi follower)
+    failover_after = 0.3           # s of the leader's silence before the successor takes over
+    [network.addresses]            # where a robot with followers listens
+    leader = "192.168.1.10:7400"   # tcp host:port, or a Zenoh endpoint "tcp/host:port"
+    [[network.links]]              # per-link overrides
+    parent = "leader"
+    child = "f1"
+    delay = 0.04
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nonholo.errors import InputFileError, ScenarioError
+from nonholo.fleet.links import IDEAL, LinkModel
+from nonholo.fleet.watchdog import WatchdogConfig
+from nonholo.sim.files import load_scenario
+from nonholo.sim.scenario import Scenario
+from nonholo.tomlfile import describe_value, read_toml
+
+TRANSPORTS = ("tcp", "zenoh", "inproc")
+LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
+FIELDS = {"transport", "keys", "seed", "stale_after", "resume_after", "decel_v", "decel_omega", "predict",
+          "addresses", "links", "failover", "order", "failover_after", *LINK_FIELDS}
+MAX_DELAY_PERIODS = 24   # delay + jitter, in control periods (bounded lockstep inboxes)
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    transport: str = "tcp"
+    keys: Path | None = None
+    seed: int = 0
+    watchdog: WatchdogConfig = WatchdogConfig()
+    predict: bool = False
+    addresses: dict = field(default_factory=dict)
+    default: LinkModel = IDEAL
+    links: dict = field(default_factory=dict)   # (parent, child) -> LinkModel
+    failover: bool = False
+    order: tuple = ()                           # failover: the leader, then its successor
+    failover_after: float = 0.3                 # s of the leader's silence before the successor takes over
+
+    def link(self, parent: str, child: str) -> LinkModel:
+        return self.links.get((parent, child), self.default)
+
+
+class _Fields:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, name: str, problem: str):
+        raise ScenarioError(self.source, name, problem)
+
+    def number(self, data: dict, key: str, where: str, default: float, high: float) -> float:
+        value = data.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not 0 <= value <= high:
+            self.fail(f"{where}.{key}", f"expected a number in [0, {high:g}], got {describe_value(value)}")
+        return float(value)
+
+    def table(self, data, where: str, allowed) -> dict:
+        if not isinstance(data, dict):
+            self.fail(where, f"expected a table, got {describe_value(data)}")
+        unknown = sorted(set(data) - set(allowed))
+        if unknown:
+            self.fail(f"{where}.{unknown[0]}"[:80], f"unknown field (expected one of: {', '.join(sorted(allowed))})")
+        return data
+
+    def link_model(self, data: dict, where: str, base: LinkModel, period: float) -> LinkModel:
+        delay = self.number(data, "delay", where, base.delay, 3600)
+        jitter = self.number(data, "jitter", where, base.jitter, 3600)
+        loss = self.number(data, "loss", where, base.loss, 0.99)
+        reorder = data.get("reorder", base.reorder)
+        if not isinstance(reorder, bool):
+            self.fail(f"{where}.reorder", f"expected true or false, got {describe_value(reorder)}")
+        if delay + jitter > MAX_DELAY_PERIODS * period * (1 + 1e-9):
+            self.fail(f"{where}.delay", f"delay + jitter = {delay + jitter:g} s exceeds {MAX_DELAY_PERIODS} control "
+                                        f"periods ({MAX_DELAY_PERIODS * period:g} s)")
+        return LinkModel(delay, jitter, loss, reorder)
+
+
+def network_config(data, scenario: Scenario, source: str = "<scenario>") -> NetworkConfig:
+    """The ``[network]`` table ``data`` (a dict, possibly empty) checked against ``scenario``;
+    ``ScenarioError`` naming the field on any problem."""
+    f = _Fields(source)
+    data = f.table(data, "network", FIELDS)
+    period = scenario.control_period or scenario.dt
+    transport = data.get("transport", "tcp")
+    if transport not in TRANSPORTS:
+        f.fail("network.transport", f"unknown value {describe_value(transport)} (valid: {', '.join(TRANSPORTS)})")
+    keys = data.get("keys")
+    if keys is not None and (not isinstance(keys, str) or not keys or len(keys) > 4096):
+        f.fail("network.keys", f"expected the path of a key file, got {describe_value(keys)}")
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        f.fail("network.seed", f"expected an integer in 0..2^63, got {describe_value(seed)}")
+    resume = data.get("resume_after", 3)
+    if isinstance(resume, bool) or not isinstance(resume, int) or not 1 <= resume <= 1000:
+        f.fail("network.resume_after", f"expected an integer in 1..1000, got {describe_value(resume)}")
+    watchdog = WatchdogConfig(f.number(data, "stale_after", "network", 0.1, 3600), resume,
+                              f.number(data, "decel_v", "network", 2.0, 1e6),
+                              f.number(data, "decel_omega", "network", 8.0, 1e6))
+    if watchdog.stale_after <= 0:
+        f.fail("network.stale_after", "must be positive")
+    predict = data.get("predict", False)
+    if not isinstance(predict, bool):
+        f.fail("network.predict", f"expected true or false, got {describe_value(predict)}")
+    names = set(scenario.names)
+    addresses = f.table(data.get("addresses", {}), "network.addresses", names)
+    for name, address in addresses.items():
+        if not isinstance(address, str) or not address or len(address) > 300:
+            f.fail(f"network.addresses.{name}", f"expected \"host:port\", got {describe_value(address)}")
+    default = f.link_model(data, "network", IDEAL, period)
+    edges = {(p, r.name) for r in scenario.robots for p in r.parents}
+    links = {}
+    items = data.get("links", [])
+    if not isinstance(items, list):
+        f.fail("network.links", "expected [[network.links]] tables")
+    for i, item in enumerate(items):
+        where = f"network.links[{i}]"
+        item = f.table(item, where, {"parent", "child", *LINK_FIELDS})
+        edge = (item.get("parent"), item.get("child"))
+        if edge not in edges:
+            f.fail(where, f"no link {describe_value(edge[0])} -> {describe_value(edge[1])} in the formation "
+                          "(parent and child must name a robot and one of its followers)")
+        if edge in links:
+            f.fail(where, f"link {edge[0]} -> {edge[1]} given twice")
+        links[edge] = f.link_model(item, where, default, period)
+    failover = data.get("failover", False)
+    if not isinstance(failover, bool):
+        f.fail("network.failover", f"expected true or false, got {describe_value(failover)}")
+    order = data.get("order", list(scenario.names))
+    if "order" in data or failover:
+        if not isinstance(order, list) or len(order) < 2 or not all(isinstance(n, str) for n in order) \
+                or not set(order) <= names or len(set(order)) != len(order):
+            f.fail("network.order", "expected a list of at least two distinct robot names")
+    after = f.number(data, "failover_after", "network", 0.3, 60)
+    if failover:
+        roots = [r.name for r in scenario.robots if not r.parents]
+        by_name = {r.name: r for r in scenario.robots}
+        if roots != [order[0]]:
+            f.fail("network.order", f"failover needs one leader, first in the order (roots: {', '.join(roots)})")
+        for robot in scenario.robots:
+            if order[0] in robot.parents and getattr(robot, "law", None) != "separation-bearing":
+                f.fail("network.failover", f"{robot.name} follows the leader with an l-l law; failover hands "
+                                           "only l-phi followers over to the successor")
+        if order[0] not in by_name[order[1]].parents:
+            f.fail("network.order", f"the successor {order[1]} must follow the leader {order[0]} directly")
+        if after <= watchdog.stale_after:
+            f.fail("network.failover_after", "must exceed stale_after (the followers stop first)")
+    return NetworkConfig(transport, Path(keys) if keys else None, seed, watchdog, predict, dict(addresses),
+                         default, links, failover, tuple(order), after)
+
+
+def load_fleet(path) -> tuple[Scenario, NetworkConfig]:
+    """A scenario file and its ``[network]`` table (defaults when absent)."""
+    scenario = load_scenario(path)
+    try:
+        data = read_toml(Path(path))
+    except InputFileError as exc:   # load_scenario read it a moment ago
+        raise ScenarioError(str(path), "", exc.problem) from None
+    config = network_config(data.get("network", {}), scenario, str(path))
+    if config.keys is not None and not config.keys.is_absolute():
+        config = NetworkConfig(**{**config.__dict__, "keys": Path(path).parent / config.keys})
+    return scenario, config
