@@ -126,7 +126,7 @@ def test_live_fleet_page(page, tmp_path):
 
         def fleet():
             try:
-                outcome["run"] = run_fleet(scenario, observer=FleetObserver(feed), speed=2.0)
+                outcome["run"] = run_fleet(scenario, transport="inproc", observer=FleetObserver(feed), speed=2.0)
             except BaseException as exc:   # reported by the test below
                 outcome["error"] = exc
 

@@ -109,9 +109,9 @@ def test_fleet_snapshots_keep_up_and_match_the_result(tmp_path):
             super().__call__(programs)
             snapshots.append((time.monotonic(), json.loads(feed.latest()[1])))
 
-    run_fleet(scenario, speed=None)                       # compiled and warm
+    run_fleet(scenario, "inproc", speed=None)             # compiled and warm
     started = time.monotonic()
-    run = run_fleet(scenario, observer=Keeping(feed), speed=4.0)
+    run = run_fleet(scenario, "inproc", observer=Keeping(feed), speed=4.0)
     wall = time.monotonic() - started
     assert wall < 4.0 / 4.0 + 1.0                           # kept pace: 200 instants of 8 robots in ~1 s
     stamps = np.array([s[0] for s in snapshots])
@@ -154,7 +154,7 @@ def test_final_snapshot_of_an_l_l_follower(tmp_path):
     scenario = load_scenario(examples.resolve("formation-eight-triangle"))
     scenario = dataclasses.replace(scenario, duration=1.0, dt=0.01, control_period=0.02, steps=None)
     feed = LatestFeed()
-    run = run_fleet(scenario, observer=FleetObserver(feed))
+    run = run_fleet(scenario, "inproc", observer=FleetObserver(feed))
     last = json.loads(feed.latest()[1])
     l1, l2 = run.result.output_errors("F")
     assert abs(l1[-1]) > 1e-3 and abs(l2[-1]) > 1e-3
