@@ -8,7 +8,7 @@ import pytest
 from nonholo import examples
 from nonholo.fleet.launch import run_fleet
 from nonholo.sim.files import load_scenario
-from nonholo.sim.simulator import simulate
+from nonholo.sim.simulator import planned_groups, simulate
 
 RELATIVE = 1e-9
 FLOOR = 1e-12   # metrics at the rounding floor (an error of 1e-16 against 0) compare absolutely
@@ -75,6 +75,15 @@ def test_lockstep_equals_centralized_sampled_data(make):
     assert summary["network"]["mode"] == "lockstep"
     for link in summary["network"]["links"].values():
         assert link["rejected"] == 0 and link["lost"] == 0 and link["sent"] == link["received"]
+
+
+def test_planning_returns_the_plan_it_ran():
+    """The bundled chain's violent start-up re-plans its sub-steps up to the last iteration:
+    the plan returned must be the one integrated (it was updated after the last run once,
+    and a fleet of it ended in a KeyError)."""
+    for planned in planned_groups(sampled("formation-chain")):
+        assert planned.plan.max() > 100   # the start-up needs hundreds of sub-steps
+        assert planned.rows.shape[0] == planned.targets.shape[0] == planned.plan.size + 1
 
 
 def test_fleet_cli_json(tmp_path, capsys):

@@ -466,7 +466,7 @@ def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress
                 scenario.hold_every)
         _integrate_chunks(integrate, args, n_steps, float(plan.sum()) * n_robots * n_batch, scenario.name,
                           n_robots * n_batch, progress, (stats, pair_stats, records, held, step_rate))
-        if iterations == 1:
+        if iteration == iterations - 1:   # the last run stands (its plan is the one returned)
             break
         needed = measured_plan(step_rate, group.prior, dt)
         if np.all(needed <= plan):
