@@ -54,6 +54,22 @@ def test_run_writes_plot_and_output_folder(tmp_path, capsys):
     assert "leader" in capsys.readouterr().out
 
 
+def test_terminal_summary_fits_100_columns():
+    """Long scenario names, tiny peaks and long notes wrap or shrink instead of overflowing."""
+    from nonholo.cli.run import format_summary
+
+    robot = {"role": "tracking", "controller": "dynamic-feedback", "control": {"peak_v": 0.559, "peak_omega": 0.000757},
+             "error": {"mean": 3.5e-06, "max": 1e-05, "final": 1e-05},
+             "events": {"saturated_v_samples": 0, "saturated_omega_samples": 0, "singular_samples": 0}}
+    summary = {"scenario": "a-rather-long-scenario-name-" * 3, "reference": {"kind": "eight"},
+               "simulation": {"duration": 251.327, "steps": 25133, "dt": 0.01, "method": "rk4", "max_substeps": 1,
+                              "elapsed_s": 3.3},
+               "robots": {"leader": robot}, "safety": {}}
+    text = format_summary(summary)
+    assert max(len(line) for line in text.splitlines()) <= 100
+    assert "0.000757" not in text and "0.00076" in text   # the peak shrinks to the column's 7 characters
+
+
 def test_bundled_example_runs_by_name(capsys):
     assert main(["run", "expression", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["robots"]["leader"]["events"]["saturated_v_samples"] > 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
@@ -100,17 +101,25 @@ def _g(value, width: int = 9) -> str:
     return f"{'-':>{width}}" if value is None else f"{value:{width}.3g}"
 
 
+def _fit(value: float, width: int = 7) -> str:
+    """``value`` in at most ``width`` characters, as many digits as fit (the table stays within 100 columns)."""
+    for text in (f"{value:.3g}", f"{value:.2g}", f"{value:.0e}"):
+        if len(text) <= width:
+            return f"{text:>{width}}"
+    return f"{value:>{width}.0e}"
+
+
 def format_summary(summary: dict) -> str:
     """A terminal summary (at most 100 columns): a line per robot, then safety."""
     sim = summary["simulation"]
     reference = summary["reference"]["kind"] + " reference" if summary["reference"] else "no reference"
     lines = [f"{summary['scenario']}: {reference}, {sim['duration']:.6g} s, {sim['steps']} steps of {sim['dt']:.4g} s "
-             f"({sim['method']}, up to {sim['max_substeps']} sub-steps), {sim['elapsed_s']:.3f} s",
+             f"({sim['method']}, up to {sim['max_substeps']} sub-steps), {sim['elapsed_s']:.2f} s",
              f"{'robot':<16} {'law':<26} {'what':<10} {'mean':>9} {'max':>9} {'final':>9} {'peak v':>7} {'peak w':>7}"]
     notes = []
     for name, robot in summary["robots"].items():
         c, ev = robot["control"], robot["events"]
-        peaks = f"{c['peak_v']:7.3g} {c['peak_omega']:7.3g}"
+        peaks = f"{_fit(c['peak_v'])} {_fit(c['peak_omega'])}"
         if robot["role"] == "follower":
             f = robot["formation"]
             law = f"{'l-phi' if f['law'] == 'separation-bearing' else 'l-l'} of {', '.join(f['leaders'])}"
@@ -153,4 +162,6 @@ def format_summary(summary: dict) -> str:
                      f"2d = {safety['two_d']:g} m")
     lines += notes
     lines.append("errors on the uniform output grid; peak v in m/s, peak w in rad/s")
-    return "\n".join(lines)
+    # long names and notes wrap (continuation lines indented): the terminal output fits 100 columns
+    return "\n".join(textwrap.fill(line, 100, subsequent_indent="    ", break_on_hyphens=False)
+                     if len(line) > 100 else line for line in lines)
