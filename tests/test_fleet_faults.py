@@ -14,6 +14,7 @@ import pytest
 from nonholo.comm.transports.hello import HelloFailed, LinkAuth
 from nonholo.comm.transports.tcp import connect_tcp
 from nonholo.fleet.config import load_fleet
+from nonholo.fleet.launch import run_fleet
 from nonholo.fleet.process import read_trace
 from nonholo.fleet.spawn import start_robot_processes
 
@@ -49,6 +50,16 @@ leader = "leader"
 l = 2.0
 phi = "-pi/3"
 """
+
+
+@pytest.fixture(scope="module", autouse=True)
+def compiled(tmp_path_factory):
+    """Compile what the robot processes run (numba caches it on disk) before any of them starts:
+    on a fresh install four processes compiling at once on two cores outlast the start-up bound."""
+    path = tmp_path_factory.mktemp("compile") / "faults.toml"
+    path.write_text(SCENARIO.replace("duration = 2.0", "duration = 0.2"))
+    scenario, config = load_fleet(path)
+    run_fleet(scenario, "inproc", "realtime", config=config)
 
 
 def wait_running(robots, names, bound=15.0):
