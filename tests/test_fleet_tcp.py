@@ -5,9 +5,8 @@ import pytest
 
 from nonholo import examples
 from nonholo.cli import main
-from nonholo.fleet.config import load_fleet
+from nonholo.fleet.config import load_fleet, with_overrides
 from nonholo.fleet.launch import run_fleet
-from nonholo.fleet.process import with_overrides
 from nonholo.sim.simulator import simulate
 from test_fleet_lockstep import assert_same_result
 

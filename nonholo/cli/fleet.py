@@ -43,14 +43,12 @@ def handle(args: argparse.Namespace) -> int:
     from nonholo.fleet.launch import run_fleet
     from nonholo.fleet.report import format_network, plot_link_health
     from nonholo.fleet.config import load_fleet
-    from nonholo.fleet.process import with_overrides
 
     viewing = FleetViewing(args, "nonholo fleet")
     try:
         source = examples.resolve(args.scenario)
-        scenario, config = load_fleet(source)
         overrides = {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
-        scenario = with_overrides(scenario, **overrides)
+        scenario, config = load_fleet(source, overrides)
         watched = viewing.speed is not None
         transport = args.transport or ("inproc" if watched else config.transport)   # a live view watches in process
         viewing.start()

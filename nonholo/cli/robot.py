@@ -56,15 +56,15 @@ def handle(args: argparse.Namespace) -> int:
     from nonholo.comm.errors import CommError
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.config import load_fleet
-    from nonholo.fleet.process import RobotOptions, robot_main, with_overrides
+    from nonholo.fleet.process import RobotOptions, robot_main
 
     def announce(port):
         if port is not None:
             print(f"listening {port}", flush=True)
 
     try:
-        scenario, config = load_fleet(examples.resolve(args.scenario))
-        scenario = with_overrides(scenario, args.duration, args.dt, args.control_period)
+        scenario, config = load_fleet(examples.resolve(args.scenario), {"duration": args.duration, "dt": args.dt,
+                                                                         "control_period": args.control_period})
         connect = []
         for item in args.connect:
             parent, sep, address = item.partition("=")

@@ -12,7 +12,6 @@ import numpy as np
 
 from nonholo.fleet.config import load_fleet
 from nonholo.fleet.launch import run_fleet
-from nonholo.fleet.process import with_overrides
 
 FOLLOWERS = 7
 
@@ -42,8 +41,7 @@ def chain_text(followers: int = FOLLOWERS) -> str:
 def _run(folder: Path, name: str, text: str, transport: str, mode: str, **overrides):
     path = folder / f"{name}.toml"
     path.write_text(text)
-    scenario, config = load_fleet(path)
-    scenario = with_overrides(scenario, **overrides)
+    scenario, config = load_fleet(path, overrides)
     return run_fleet(scenario, transport, mode, config=config, source=path, overrides=overrides).network
 
 
@@ -83,8 +81,7 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
 
     path = folder / "faults.toml"
     path.write_text(star_text().replace("duration = 2.0", f"duration = {duration!r}"))
-    scenario, _ = load_fleet(path)
-    scenario = with_overrides(scenario, dt=0.01, control_period=0.02)
+    scenario, _ = load_fleet(path, {"dt": 0.01, "control_period": 0.02})
     overrides = {"dt": 0.01, "control_period": 0.02}
     robots = start_robot_processes(path, scenario, None, overrides, 20.0,
                                    extra={n: ["--mode", "realtime"] for n in scenario.names})

@@ -26,7 +26,7 @@ keys, the link model (spec fleet.md §3–4) and the watchdog (§5).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from nonholo.errors import InputFileError, ScenarioError
@@ -137,6 +137,9 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
         where = f"network.links[{i}]"
         item = f.table(item, where, {"parent", "child", *LINK_FIELDS})
         edge = (item.get("parent"), item.get("child"))
+        for key, value in zip(("parent", "child"), edge):
+            if not isinstance(value, str):
+                f.fail(f"{where}.{key}", f"expected a robot's name, got {describe_value(value)}")
         if edge not in edges:
             f.fail(where, f"no link {describe_value(edge[0])} -> {describe_value(edge[1])} in the formation "
                           "(parent and child must name a robot and one of its followers)")
@@ -169,9 +172,20 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
                          default, links, failover, tuple(order), after)
 
 
-def load_fleet(path) -> tuple[Scenario, NetworkConfig]:
-    """A scenario file and its ``[network]`` table (defaults when absent)."""
-    scenario = load_scenario(path)
+def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=None) -> Scenario:
+    """The scenario with [simulation] duration, dt, control_period replaced where given."""
+    changes = {k: v for k, v in (("duration", duration), ("dt", dt), ("control_period", control_period))
+               if v is not None}
+    if "dt" in changes or "duration" in changes or "control_period" in changes:
+        changes["steps"] = None
+    return replace(scenario, **changes) if changes else scenario
+
+
+def load_fleet(path, overrides: dict | None = None) -> tuple[Scenario, NetworkConfig]:
+    """A scenario file, with ``overrides`` ({"duration", "dt", "control_period"}, see
+    ``with_overrides``) applied, and its ``[network]`` table (defaults when absent), checked
+    against the scenario as run (delays are bounded in control periods)."""
+    scenario = with_overrides(load_scenario(path), **(overrides or {}))
     try:
         data = read_toml(Path(path))
     except InputFileError as exc:   # load_scenario read it a moment ago

@@ -12,7 +12,7 @@ import json
 import os
 import socket
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,13 +41,18 @@ class RobotOptions:
     transport: str = "tcp"          # tcp | zenoh (addresses then Zenoh endpoints, "tcp/host:port")
 
 
-def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=None) -> Scenario:
-    """The scenario with [simulation] duration, dt, control_period replaced where given."""
-    changes = {k: v for k, v in (("duration", duration), ("dt", dt), ("control_period", control_period))
-               if v is not None}
-    if "dt" in changes or "duration" in changes or "control_period" in changes:
-        changes["steps"] = None
-    return replace(scenario, **changes) if changes else scenario
+ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic")
+
+
+def zenoh_endpoint(text: str, field: str) -> str:
+    """A Zenoh endpoint ``PROTOCOL/HOST:PORT`` (PROTOCOL one of ``ZENOH_PROTOCOLS``), checked
+    here so that a malformed one is one line, not an error from inside Zenoh."""
+    protocol, _, address = text.partition("/")
+    if protocol not in ZENOH_PROTOCOLS or not address:
+        raise NonholoInputError(f"{field}: expected a Zenoh endpoint PROTOCOL/HOST:PORT (PROTOCOL one of "
+                                f"{', '.join(ZENOH_PROTOCOLS)}), got {text!r:.80}")
+    split_address(address, field)
+    return text
 
 
 def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotOptions, setup) -> tuple:
@@ -63,16 +68,25 @@ def resolve_addresses(scenario: Scenario, config: NetworkConfig, options: RobotO
         if text is None:
             raise NonholoInputError(f"network.addresses.{parent}: no address for {options.name!r}'s parent "
                                     f"{parent!r} (give it there or --connect {parent}=HOST:PORT)")
-        parents[parent] = text if options.transport == "zenoh" else split_address(text, f"address of {parent}")
+        parents[parent] = zenoh_endpoint(text, f"address of {parent}") if options.transport == "zenoh" else \
+            split_address(text, f"address of {parent}")
     listen = None
     if setup.children or (config.failover and options.name in config.order[1:2]):
         if options.listen_fd is not None:
-            return socket.socket(fileno=options.listen_fd), parents
+            try:
+                listening = socket.socket(fileno=options.listen_fd)
+            except OSError as exc:
+                raise NonholoInputError(f"--listen-fd {options.listen_fd}: not an open socket ({exc.strerror})") \
+                    from None
+            if listening.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN) == 0:
+                listening.detach()
+                raise NonholoInputError(f"--listen-fd {options.listen_fd}: not a listening socket")
+            return listening, parents
         text = options.listen or config.addresses.get(options.name)
         if text is None:
             raise NonholoInputError(f"network.addresses.{options.name}: {options.name!r} has followers and needs "
                                     "an address to listen on (or --listen HOST:PORT)")
-        listen = text if options.transport == "zenoh" else split_address(text, "--listen")
+        listen = zenoh_endpoint(text, "--listen") if options.transport == "zenoh" else split_address(text, "--listen")
     return listen, parents
 
 
