@@ -6,16 +6,19 @@ edits this file. Exit codes: 0 success, 1 run-time failure, 2 bad input.
 
 ``main`` is also the last resort for what a command does not handle itself: a
 ``NonholoInputError`` is one line and exit 2, a ``SimulationError`` one line and exit 1,
-Ctrl-C exit 130, and a reader that closes the pipe (``nonholo run … | head -2``) ends the
+Ctrl-C exit 130 (a command that starts processes also ends on SIGTERM or SIGHUP as on
+Ctrl-C, with one line and exit 143 or 129: ``signals_interrupt``), and a reader that closes the pipe (``nonholo run … | head -2``) ends the
 command quietly with exit 141, as a Unix tool killed by SIGPIPE does (the recipe of the
 Python documentation, "Note on SIGPIPE": the rest of the output goes to the null device).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
+import signal
 import sys
 
 EXIT_OK = 0
@@ -23,6 +26,40 @@ EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE
+
+
+TERMINATING = ("SIGTERM", "SIGHUP")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread as Ctrl-C's KeyboardInterrupt is, so that
+    every cleanup Ctrl-C runs (``finally`` blocks, reaping child processes) runs for it too."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def signals_interrupt():
+    """Within: SIGTERM and SIGHUP (where the platform has them) raise ``Terminated`` in the
+    main thread; once one has, the next ones are ignored so that the cleanup is not cut
+    short. The previous handlers are restored on the way out."""
+    signums = [getattr(signal, name) for name in TERMINATING if hasattr(signal, name)]
+    previous = {signum: signal.getsignal(signum) for signum in signums}
+
+    def interrupt(signum, frame):
+        for other in signums:
+            signal.signal(other, signal.SIG_IGN)
+        raise Terminated(signum)
+
+    for signum in signums:
+        signal.signal(signum, interrupt)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -63,6 +100,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         _discard_stdout()
         return EXIT_BROKEN_PIPE
+    except Terminated as exc:
+        print(f"{prog}: ended by {signal.Signals(exc.signum).name}; every process it started was stopped",
+              file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     except NonholoInputError as exc:

@@ -6,11 +6,13 @@ import json
 import sys
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
-from nonholo.cli.robot import add_simulation_overrides
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, signals_interrupt
+from nonholo.cli.robot import add_mode_option, add_simulation_overrides
 
 
 def register(subparsers) -> None:
+    from nonholo.fleet.config import TRANSPORTS
+
     parser = subparsers.add_parser(
         "fleet", help="run each robot of a scenario as its own program",
         description="Run every robot of a scenario as its own program exchanging FIPA-ACL states "
@@ -18,13 +20,11 @@ def register(subparsers) -> None:
                     "section. Needs sampled-data control ([simulation] control_period).",
         epilog="Exit codes: 0 ok, 1 failure, 2 bad input.")
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
-    parser.add_argument("--transport", choices=("tcp", "zenoh", "inproc"),
+    parser.add_argument("--transport", choices=TRANSPORTS,
                         help="tcp: one process per robot over authenticated TCP (default, or [network] "
                              "transport); zenoh: one process per robot, Zenoh peers; inproc: every robot in "
                              "this process")
-    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
-                        help="lockstep: logical time, equal to the centralized sampled-data run; "
-                             "realtime: the wall clock at the control rate, with the watchdog")
+    add_mode_option(parser)
     add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--out", metavar="DIR",
@@ -52,8 +52,9 @@ def handle(args: argparse.Namespace) -> int:
         watched = viewing.speed is not None
         transport = args.transport or ("inproc" if watched else config.transport)   # a live view watches in process
         viewing.start()
-        run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
-                        overrides=overrides, observer=viewing.observer, speed=viewing.speed)
+        with signals_interrupt():   # SIGTERM, SIGHUP: every robot process reaped, as on Ctrl-C
+            run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
+                            overrides=overrides, observer=viewing.observer, speed=viewing.speed)
     except NonholoInputError as exc:
         viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)

@@ -15,6 +15,15 @@ def add_simulation_overrides(parser: argparse.ArgumentParser) -> None:
                         help="override [simulation] control_period (a multiple of dt)")
 
 
+def add_mode_option(parser: argparse.ArgumentParser) -> None:
+    """--mode lockstep|realtime (default lockstep), for `nonholo robot` and `nonholo fleet`."""
+    from nonholo.fleet.config import MODES
+
+    parser.add_argument("--mode", choices=MODES, default=MODES[0],
+                        help="lockstep: logical time, equal to the centralized sampled-data run; "
+                             "realtime: the wall clock at the control rate, with the watchdog")
+
+
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "robot", help="run one robot of a scenario as its own program (TCP)",
@@ -41,9 +50,7 @@ def register(subparsers) -> None:
     parser.add_argument("--transport", choices=("tcp", "zenoh"),
                         help="tcp (default, or [network] transport); zenoh: addresses are Zenoh endpoints "
                              "such as tcp/192.168.1.10:7447")
-    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
-                        help="lockstep: logical time, equal to the centralized sampled-data run; "
-                             "realtime: the wall clock at the control rate, with the watchdog")
+    add_mode_option(parser)
     parser.add_argument("--wait", type=float, default=20.0, metavar="S",
                         help="longest wait for a peer before giving up (default 20)")
     parser.add_argument("--trace", metavar="FILE", help="write states, commands and the report (.npz)")

@@ -1,7 +1,8 @@
 """Fleet figures (``nonholo bench-fleet``): a leader and 7 followers, one process each, over
 TCP on this machine — one-way latency, loss, the highest control rate the 8 processes
-sustain — and lockstep control steps per second of the 7-follower chain. Figures to
-report, asserted nowhere."""
+sustain, each next to the machine's floor at that moment (``nonholo.fleet.floor``) — and
+lockstep control steps per second of the 7-follower chain. Figures to report, asserted
+nowhere."""
 from __future__ import annotations
 
 import math
@@ -11,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from nonholo.fleet.config import load_fleet
+from nonholo.fleet.floor import floor_figures
 from nonholo.fleet.launch import run_fleet
 
 FOLLOWERS = 7
@@ -121,31 +123,20 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
             "standstill_ms_max": float(max(still_ms)) if still_ms else None}
 
 
-def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None, faults: bool = True) -> dict:
+def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None, faults: bool = True,
+              latency_only: bool = False) -> dict:
+    """Every figure (``latency_only``: the realtime TCP ones and their floors alone)."""
     say = progress or (lambda message: None)
     figures = {}
     with tempfile.TemporaryDirectory(prefix="nonholo-bench-") as folder:
         folder = Path(folder)
-        say("lockstep 7-follower chain, in process")
-        lockstep = {}
-        for transport in ("inproc", "tcp"):
-            network = _run(folder, "chain", chain_text(), transport, "lockstep", duration=20.0, dt=0.01,
-                           control_period=0.02)
-            lockstep[transport] = network["control_steps_per_s"]
-            say(f"lockstep 7-follower chain over {transport}: {network['control_steps_per_s']:.0f} steps/s")
-        figures["lockstep_steps_per_s"] = lockstep
-        trials = []
-        for rate in rates:
-            say(f"realtime leader + {FOLLOWERS} followers over TCP at {rate} Hz")
-            period = 1.0 / rate
-            network = _run(folder, "star", star_text(), "tcp", "realtime", duration=duration, dt=period,
-                           control_period=period)
-            trial = realtime_figures(network, rate)
-            trial["sustained"] = sustained(trial)
-            trials.append(trial)
-        figures["realtime_tcp"] = trials
-        passed = [t["rate_hz"] for t in trials if t["sustained"]]
+        if not latency_only:
+            figures["lockstep_steps_per_s"] = lockstep_figures(folder, say)
+        figures["realtime_tcp"] = realtime_trials(folder, rates, duration, say)
+        passed = [t["rate_hz"] for t in figures["realtime_tcp"] if t["sustained"]]
         figures["highest_sustained_hz"] = max(passed) if passed else None
+        if latency_only:
+            return figures
         try:
             import zenoh  # noqa: F401
         except ImportError:
@@ -163,16 +154,51 @@ def run_bench(rates=(100, 200, 400, 800), duration: float = 3.0, progress=None, 
     return figures
 
 
+def lockstep_figures(folder: Path, say) -> dict:
+    """Control steps per second of the lockstep 7-follower chain, in process and over TCP."""
+    lockstep = {}
+    for transport in ("inproc", "tcp"):
+        network = _run(folder, "chain", chain_text(), transport, "lockstep", duration=20.0, dt=0.01,
+                       control_period=0.02)
+        lockstep[transport] = network["control_steps_per_s"]
+        say(f"lockstep 7-follower chain over {transport}: {network['control_steps_per_s']:.0f} steps/s")
+    return lockstep
+
+
+def realtime_trials(folder: Path, rates, duration: float, say) -> list[dict]:
+    """Per rate, the realtime star over TCP, then the machine's floor at that rate (right
+    after, so under the same load)."""
+    trials = []
+    for rate in rates:
+        say(f"realtime leader + {FOLLOWERS} followers over TCP at {rate:g} Hz, then the floor")
+        period = 1.0 / rate
+        network = _run(folder, "star", star_text(), "tcp", "realtime", duration=duration, dt=period,
+                       control_period=period)
+        trial = realtime_figures(network, rate)
+        trial["sustained"] = sustained(trial)
+        trial["floor"] = floor_figures(rate, duration, FOLLOWERS)
+        trials.append(trial)
+    return trials
+
+
 def format_bench(figures: dict) -> str:
-    lines = ["lockstep 7-follower chain: " + ", ".join(f"{t} {v:.0f} steps/s"
-                                                    for t, v in figures["lockstep_steps_per_s"].items()),
-             f"{'rate Hz':>8} {'lat p50':>8} {'p99':>7} {'max':>7} {'sent':>6} {'lost':>5} {'period':>7} "
-             f"{'p99':>7} {'stops':>5}  sustained   (ms)"]
+    """The figures as lines of at most 100 columns."""
+    lines = []
+    if "lockstep_steps_per_s" in figures:
+        lines.append("lockstep 7-follower chain: " + ", ".join(f"{t} {v:.0f} steps/s"
+                                                          for t, v in figures["lockstep_steps_per_s"].items()))
+    lines.append(f"{'rate Hz':>8} {'lat p50':>8} {'p99':>7} {'max':>7} {'sent':>6} {'lost':>5} {'period':>7} "
+                 f"{'p99':>7} {'stops':>5} {'sustained':>9} {'floor p50':>9} {'p99':>6}  (ms)")
     for t in figures["realtime_tcp"]:
+        floor = t["floor"]
         lines.append(f"{t['rate_hz']:>8g} {t['latency_p50_ms']:8.3f} {t['latency_p99_ms']:7.3f} "
                      f"{t['latency_max_ms']:7.2f} {t['sent']:>6} {t['lost']:>5} {t['period_mean_ms']:7.3f} "
-                     f"{t['period_p99_ms']:7.3f} {t['stops']:>5}  {'yes' if t['sustained'] else 'no'}")
+                     f"{t['period_p99_ms']:7.3f} {t['stops']:>5} {'yes' if t['sustained'] else 'no':>9} "
+                     f"{floor['latency_p50_ms']:9.3f} {floor['latency_p99_ms']:6.3f}")
     lines.append(f"highest sustained control rate of 8 processes: {figures['highest_sustained_hz']} Hz")
+    lines.append("floor: 1 -> 7 minimal processes, stamps over TCP at the same rate right after "
+                 "(what the OS adds)")
+
     def ms(value):
         return "-" if value is None else f"{value:.0f}"
 

@@ -37,6 +37,7 @@ from nonholo.sim.scenario import Scenario
 from nonholo.tomlfile import describe_value, read_toml
 
 TRANSPORTS = ("tcp", "zenoh", "inproc")
+MODES = ("lockstep", "realtime")   # logical time, or the wall clock
 LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
 FIELDS = {"transport", "keys", "seed", "stale_after", "resume_after", "decel_v", "decel_omega", "predict",
           "addresses", "links", "failover", "order", "failover_after", *LINK_FIELDS}

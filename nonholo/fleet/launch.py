@@ -10,7 +10,6 @@ trajectories and held commands by the kernel's statistics code, plus a ``network
 from __future__ import annotations
 
 import asyncio
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,19 +18,16 @@ import numpy as np
 
 from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.errors import NonholoInputError
-from nonholo.fleet.config import NetworkConfig
+from nonholo.fleet.config import MODES, TRANSPORTS, NetworkConfig
 from nonholo.fleet.keys import fleet_keys, keys_from_file, robot_channel
 from nonholo.fleet.report import link_timelines
 from nonholo.fleet.process import make_plant, read_trace, run_program
 from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
-from nonholo.fleet.spawn import run_robot_processes
+from nonholo.fleet.spawn import start_robot_processes
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
-
-TRANSPORTS = ("tcp", "zenoh", "inproc")
-MODES = ("lockstep", "realtime")
 
 
 @dataclass
@@ -91,18 +87,20 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
         if mode == "realtime":
             run_s += scenario.duration
-        workdir = run_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s, run_s,
-                                     extra={name: ["--mode", mode] for name in scenario.names},
-                                     transport=transport,
-                                     failover=config.order if config.failover and mode == "realtime" else ())
-        try:
+        robots = start_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s,
+                                       extra={name: ["--mode", mode] for name in scenario.names},
+                                       transport=transport,
+                                       failover=config.order if config.failover and mode == "realtime" else ())
+        try:   # whatever happens (a failure, Ctrl-C, SIGTERM), every process is reaped and the folder goes
+            robots.wait(run_s)
+            robots.stop_all()
             for name in scenario.names:
-                robot_states, robot_helds, report = read_trace(workdir / f"{name}.npz")
+                robot_states, robot_helds, report = read_trace(robots.workdir / f"{name}.npz")
                 states[:, :, index[name]] = robot_states
                 helds[:, :, index[name]] = robot_helds
                 reports.append(report)
         finally:
-            shutil.rmtree(workdir, ignore_errors=True)
+            robots.discard()
     elapsed = time.perf_counter() - started
     result = score_states(scenario, planned, states, helds, elapsed)
     network = network_report(reports, transport, mode, elapsed, scenario)

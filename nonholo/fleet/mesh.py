@@ -93,8 +93,8 @@ class RobotLinks(InboxTransport):
     async def _pump_hub(self) -> None:
         try:
             while True:
-                peer, frame = await self.hub.recv()
-                self.deliver(peer, frame)
+                peer, frame, arrived = await self.hub.recv_stamped()
+                self.deliver(peer, frame, arrived=arrived)
         except TransportClosed:
             return
 

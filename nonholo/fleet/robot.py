@@ -154,10 +154,16 @@ class RobotProgram:
 
     # ------------------------------------------------------------------ messages
     async def _send(self, to: str, message) -> None:
-        await self.transport.send(self.channel.pack(message), to=to)
+        await self._send_frame(to, self.channel.pack(message))
+
+    async def _send_frame(self, to: str, frame: bytes) -> None:
+        await self.transport.send(frame, to=to)
         self.tally.sent[to] += 1
 
-    def _accept(self, peer: str, frame: bytes) -> None:
+    def _accept(self, peer: str, frame: bytes, arrived: float | None = None) -> None:
+        """Open a frame from ``peer`` and act on it; ``arrived``: when the transport read it
+        (``self.clock``'s time; default now)."""
+        arrived = self.clock() if arrived is None else arrived
         try:
             opened, message = self.channel.unpack(frame)
         except CommError:
@@ -169,17 +175,17 @@ class RobotProgram:
             self.tally.rejected[peer] += 1
             return
         try:
-            self._dispatch(sender, message, opened.epoch)
+            self._dispatch(sender, message, opened.epoch, arrived)
         except CommError:
             self.tally.rejected[peer] += 1
             return
         self.tally.received[sender] += 1
         self._changed.set()
 
-    def _dispatch(self, sender: str, message, epoch: int = 0) -> None:
+    def _dispatch(self, sender: str, message, epoch: int, arrived: float) -> None:
         performative = message.performative
         if sender in self.setup.children:
-            self.heard[sender] = self.clock()
+            self.heard[sender] = arrived
         if sender in self.setup.children and performative == "subscribe":
             self.subscribers.add(sender)
             self._replies.append((sender, msg.act("agree", self.setup.name, sender, message.conversation_id,
@@ -204,17 +210,16 @@ class RobotProgram:
             self.tally.states_received[sender] += 1
             if not queue or state.k > queue[-1].k:
                 queue.append(state)
-                if self.realtime:
-                    now = self.clock()
-                    self.arrival[sender] = now
-                    self.latency[sender].append(now - state.t)
+                if self.realtime:   # one-way latency: the send stamp to the frame's arrival
+                    self.arrival[sender] = arrived
+                    self.latency[sender].append(arrived - state.t)
         else:
             raise CommError(f"{performative} from {sender} is not part of the fleet protocol")
 
     async def _receive(self) -> None:
         while True:
-            peer, frame = await self.transport.recv()
-            self._accept(peer, frame)
+            peer, frame, arrived = await self.transport.recv_stamped()
+            self._accept(peer, frame, arrived)
             while self._replies:
                 to, reply = self._replies.pop(0)
                 await self._send(to, reply)
@@ -270,6 +275,20 @@ class RobotProgram:
             x, y, theta, p1.x, p1.y, p1.theta, p1.v, p2.x, p2.y, p2.theta, p2.v, target[0], target[1], target[2],
             target[3], k1, k2, d, s.sin_floor, s.v_max, s.omega_max)
         return v, omega, 0.0, singular, sat_v, sat_w
+
+    def _guarded(self, guard: WatchdogState, age: float, new: bool, command: tuple, period: float, t: float,
+                 at: float | None = None) -> tuple[WatchdogState, tuple]:
+        """The watchdog's step at a control instant (spec fleet.md §5): its next state and
+        the command to hold, the law's ``command`` or, while stopping, the ramp to zero. A
+        stop or resume is recorded at run time ``t`` (and monotonic time ``at``, realtime)."""
+        guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0], command[1], period)
+        self.guard = guard   # explicit data, for observers
+        if event is not None:
+            stamp = {} if at is None else {"at": at}
+            self._event({"t": t, "event": event, "age": age if age != float("inf") else None, **stamp})
+        if guard.mode != FOLLOWING:
+            command = (v, omega, 0.0, 0.0, 0.0, 0.0)
+        return guard, command
 
     def _take_states(self, instant: int) -> tuple[float, bool]:
         """Each parent's message of the instant its link schedule names usable at
@@ -340,14 +359,7 @@ class RobotProgram:
                     else:
                         command = (0.0,) * kn.HELD_COUNT
                     if s.parents:
-                        guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
-                                                               command[1], period)
-                        self.guard = guard   # explicit data, for observers
-                        if event is not None:
-                            self._event({"t": instant * period, "event": event,
-                                         "age": age if age != float("inf") else None})
-                        if guard.mode != FOLLOWING:
-                            command = (v, omega, 0.0, 0.0, 0.0, 0.0)
+                        guard, command = self._guarded(guard, age, new, command, period, instant * period)
                     held = command
                     v, omega = held[0], held[1]
                     self.plant.command(v, omega)
@@ -486,14 +498,7 @@ class RobotProgram:
                     command = self._command(k, x, y, theta, xi) if all(self.inbox[p] for p in s.parents) \
                         else (0.0,) * kn.HELD_COUNT
                     if s.parents:
-                        guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0],
-                                                               command[1], period)
-                        self.guard = guard   # explicit data, for observers
-                        if event is not None:
-                            self._event({"t": now - start, "event": event,
-                                         "age": age if age != float("inf") else None, "at": now})
-                        if guard.mode != FOLLOWING:
-                            command = (v, omega, 0.0, 0.0, 0.0, 0.0)
+                        guard, command = self._guarded(guard, age, new, command, period, now - start, now)
                     held = command
                     self.plant.command(held[0], held[1])
                     await self._publish(k, instant, x, y, theta, held[0], held[1], t=clock())
@@ -520,35 +525,46 @@ class RobotProgram:
 
     async def _publish(self, k: int, instant: int, x: float, y: float, theta: float, v: float,
                        omega: float, t: float | None = None) -> None:
+        """Send this robot's state of output step ``k`` to every subscriber: every frame is
+        sealed first, then all are written back to back (a follower late in the order does
+        not wait for the others' sealing); a state the link model delays leaves later."""
         if not self.setup.children:
             return
         self.seq += 1
         state = msg.RobotState(self.setup.name, k, self.seq, k * self.setup.dt if t is None else t, x, y, theta, v,
                                omega)
         content = state.to_content()
+        now = []
         for child in sorted(self.subscribers):
             if self.drops[child][instant]:
                 self.tally.lost[child] += 1   # the link model loses it on the way
                 continue
-            message = msg.act("inform", self.setup.name, child, msg.conversation(child, self.setup.name), content)
+            frame = self.channel.pack(msg.act("inform", self.setup.name, child,
+                                              msg.conversation(child, self.setup.name), content))
             delay = self.delays[child][instant] if self.realtime and child in self.delays else 0.0
             if delay > 0:
-                due = self.clock() + delay
-                if not self.reorder[child]:
-                    due = max(due, self._due.get(child, 0.0))
-                self._due[child] = due
-                task = asyncio.ensure_future(self._send_state_at(child, message, due))
-                self._delayed.add(task)
-                task.add_done_callback(self._delayed.discard)
-                continue
-            await self._send(child, message)
+                self._send_later(child, frame, delay)
+            else:
+                now.append((child, frame))
+        for child, frame in now:
+            await self._send_frame(child, frame)
             self.tally.states_sent[child] += 1
 
-    async def _send_state_at(self, child: str, message, due: float) -> None:
+    def _send_later(self, child: str, frame: bytes, delay: float) -> None:
+        """Send a state frame after its drawn ``delay`` (in order unless the link reorders)."""
+        due = self.clock() + delay
+        if not self.reorder[child]:
+            due = max(due, self._due.get(child, 0.0))
+        self._due[child] = due
+        task = asyncio.ensure_future(self._send_state_at(child, frame, due))
+        self._delayed.add(task)
+        task.add_done_callback(self._delayed.discard)
+
+    async def _send_state_at(self, child: str, frame: bytes, due: float) -> None:
         """Send a state when its drawn delay is over (realtime link model; at most
         delay/T of them wait per child, as delay + jitter ≤ 24 T)."""
         await asyncio.sleep(max(0.0, due - self.clock()))
-        await self._send(child, message)
+        await self._send_frame(child, frame)
         self.tally.states_sent[child] += 1
 
     def report(self) -> dict:

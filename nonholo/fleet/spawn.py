@@ -4,11 +4,16 @@ The launcher makes a private directory (mode 0700) with a fresh key file (mode 0
 uses the scenario's), binds a listening TCP socket on 127.0.0.1 with an OS-chosen port for
 each robot that has followers and hands it to that robot's process (so every process
 starts at once and no port can be taken in between), then waits for every process with a
-bounded wait. Whatever happens — a robot failing, a time-out, Ctrl-C — every process group
-is terminated (SIGTERM, then SIGKILL after a grace period) and reaped before it returns.
+bounded wait. Whatever happens — a robot failing, a time-out, Ctrl-C (or SIGTERM, SIGHUP
+turned into an interrupt by the command line) — every process group is terminated (SIGTERM,
+then SIGKILL after a grace period) and reaped before it returns, with those signals held
+meanwhile so that the cleanup runs to its end. On Linux a robot process also gets SIGTERM
+when the launcher dies without cleaning up (SIGKILL): ``PR_SET_PDEATHSIG``.
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 import shutil
 import signal
@@ -25,6 +30,8 @@ from nonholo.fleet.keys import write_fleet_key_file
 
 TERMINATE_GRACE_S = 1.0
 POLL_S = 0.02
+PR_SET_PDEATHSIG = 1      # linux/prctl.h
+HELD_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class LaunchError(SimulationError):
@@ -41,12 +48,13 @@ class Robots:
     commands: dict = field(default_factory=dict)    # name -> (argv, inherited fds)
     listeners: dict = field(default_factory=dict)   # name -> listening socket
     endpoints: dict = field(default_factory=dict)   # name -> Zenoh endpoint it listens on
+    stopped: bool = False                           # stop_all has run (it runs once)
 
     def start(self, name: str) -> subprocess.Popen:
         command, fds = self.commands[name]
         with open(self.workdir / f"{name}.err", "ab") as errors:
             process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors,
-                                       pass_fds=fds, start_new_session=True)
+                                       pass_fds=fds, start_new_session=True, preexec_fn=die_with_parent())
         self.processes[name] = process
         return process
 
@@ -69,7 +77,20 @@ class Robots:
 
     def stop_all(self) -> None:
         """Terminate every process group still running, then kill and reap (bounded), and
-        close the listening sockets."""
+        close the listening sockets; Ctrl-C, SIGTERM and SIGHUP wait until it is done."""
+        with signals_held():
+            self._stop_all()
+
+    def discard(self) -> None:
+        """``stop_all``, then remove the work directory (its keys and traces)."""
+        with signals_held():
+            self._stop_all()
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def _stop_all(self) -> None:
+        if self.stopped:
+            return
+        self.stopped = True
         for process in self.processes.values():
             if process.poll() is None:
                 _signal_group(process, signal.SIGTERM)
@@ -91,6 +112,39 @@ class Robots:
         except OSError:
             lines = []
         return lines[-1][:200] if lines else "no message"
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Within: Ctrl-C, SIGTERM and SIGHUP are held by the OS and delivered on the way out
+    (where the platform can hold signals)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def die_with_parent():
+    """A ``preexec_fn`` that has the child get SIGTERM when the process that started it dies
+    (Linux ``prctl(PR_SET_PDEATHSIG)``; the death of the starting thread counts, so start
+    robots from the main thread), or None where there is no such call."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent:   # the parent died before the call
+            os.kill(os.getpid(), signal.SIGTERM)
+    return preexec
 
 
 def _signal_group(process: subprocess.Popen, sig: int) -> None:
@@ -162,8 +216,7 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
                                                    wait_s, options), fds)
             robots.start(name)
     except BaseException:
-        robots.stop_all()
-        shutil.rmtree(robots.workdir, ignore_errors=True)
+        robots.discard()
         raise
     return robots
 
@@ -174,11 +227,10 @@ def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: di
     """Run every robot as its own process until all end (bounded by ``run_s``); the work
     directory holding the traces (the caller removes it). Every process is reaped."""
     robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra, transport, failover)
+    done = False
     try:
         robots.wait(run_s)
-        return robots.workdir
-    except BaseException:
-        shutil.rmtree(robots.workdir, ignore_errors=True)
-        raise
+        done = True
     finally:
-        robots.stop_all()
+        robots.stop_all() if done else robots.discard()
+    return robots.workdir

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -49,6 +50,12 @@ class Transport(abc.ABC):
     async def recv(self) -> tuple[str, bytes]:
         """Next (peer name, frame); raises TransportClosed once closed."""
 
+    async def recv_stamped(self) -> tuple[str, bytes, float]:
+        """Next (peer name, frame, arrival): ``arrival`` is when the frame was read from
+        the network, on ``time.monotonic()`` (here: when ``recv`` returned it)."""
+        peer, frame = await self.recv()
+        return peer, frame, time.monotonic()
+
     @abc.abstractmethod
     async def close(self) -> None:
         """Release the link; idempotent."""
@@ -68,7 +75,8 @@ DEFAULT_INBOX_FRAMES = 4096
 
 class InboxTransport(Transport):
     """A transport whose received frames wait in a bounded asyncio queue (``self.inbox``)
-    until ``recv``. ``deliver`` adds a frame; when the inbox is full the oldest frame is
+    until ``recv``, each stamped with its arrival (``time.monotonic()`` when it was
+    delivered, or the earlier moment the transport read it). ``deliver`` adds a frame; when the inbox is full the oldest frame is
     dropped and counted in ``inbox_dropped`` (latest-value semantics: an old state is
     worth less than a new one). Closing wakes a pending ``recv``."""
 
@@ -87,30 +95,35 @@ class InboxTransport(Transport):
             raise TransportClosed(f"{self.name} is closed")
 
     def deliver(self, peer: str, frame: bytes,
-                on_taken: Callable[[bytes], None] | None = None) -> None:
+                on_taken: Callable[[bytes], None] | None = None, arrived: float | None = None) -> None:
         """Queue a received frame; ``on_taken(frame)`` runs when it leaves the inbox (taken
-        by ``recv`` or dropped), for transports that ration the inbox per peer."""
+        by ``recv`` or dropped), for transports that ration the inbox per peer; ``arrived``:
+        when it was read (default now, on ``time.monotonic()``)."""
         if self._closed:
             return
         while self.inbox.full():
-            _, dropped, dropped_taken = self.inbox.get_nowait()
+            _, dropped, dropped_taken, _ = self.inbox.get_nowait()
             self.inbox_dropped += 1
             if dropped_taken is not None:
                 dropped_taken(dropped)
-        self.inbox.put_nowait((peer, frame, on_taken))
+        self.inbox.put_nowait((peer, frame, on_taken, time.monotonic() if arrived is None else arrived))
 
     def stats(self) -> dict:
         return {"inbox": self.inbox.qsize(), "inbox_dropped": self.inbox_dropped}
 
     async def recv(self) -> tuple[str, bytes]:
+        peer, frame, _ = await self.recv_stamped()
+        return peer, frame
+
+    async def recv_stamped(self) -> tuple[str, bytes, float]:
         self.ensure_open()
         item = await self.inbox.get()
         if item is self._CLOSED:
             raise TransportClosed(f"{self.name} is closed")
-        peer, frame, on_taken = item
+        peer, frame, on_taken, arrived = item
         if on_taken is not None:
             on_taken(frame)
-        return peer, frame
+        return peer, frame, arrived
 
     def mark_closed(self) -> bool:
         """Mark closed and wake receivers; False if it already was (close is idempotent)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 
 import zenoh
 
@@ -60,6 +61,7 @@ class ZenohTransport(InboxTransport):
         return self._publishers[key]
 
     def _on_sample(self, sample: "zenoh.Sample") -> None:  # runs on a Zenoh thread
+        arrived = time.monotonic()
         sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else "?"
         if sender == self.name:
             return
@@ -72,12 +74,12 @@ class ZenohTransport(InboxTransport):
                 self._hop_dropped += 1
                 return
             self._in_flight += 1
-        self._loop.call_soon_threadsafe(self._arrived, sender, payload)
+        self._loop.call_soon_threadsafe(self._arrived, sender, payload, arrived)
 
-    def _arrived(self, sender: str, payload: bytes) -> None:  # on the event loop
+    def _arrived(self, sender: str, payload: bytes, arrived: float) -> None:  # on the event loop
         with self._hop_lock:
             self._in_flight -= 1
-        self.deliver(sender, payload)
+        self.deliver(sender, payload, arrived=arrived)
 
     def stats(self) -> dict:
         with self._hop_lock:
