@@ -187,8 +187,8 @@ def handle_attach(args: argparse.Namespace) -> int:
         endpoint.stop()
         print(f"nonholo view: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    print(f"attached on {endpoint.address}: robots started with --observe {endpoint.address} show up "
-          "(Ctrl-C stops)", file=sys.stderr, flush=True)
+    print(f"attached on {endpoint.address}: robots with --observe {endpoint.address} show up (Ctrl-C stops)",
+          file=sys.stderr, flush=True)
     try:
         serve_until_stopped(server, args.serve_for)
     finally:
@@ -246,6 +246,9 @@ class FleetViewing:
             if args.view:
                 raise NonholoInputError("--observe: with --view the fleet's own page observes it; give one of them")
             split_address(args.observe, "--observe")
+            if (args.transport or config.transport) == "inproc":
+                raise NonholoInputError("--observe: robot processes send their status there; with --transport "
+                                        "inproc use --view")
         if args.keys:
             path = Path(args.keys)
             if not path.exists():

@@ -1,6 +1,7 @@
 """The live feed: the newest snapshot of a running fleet, latest wins.
 
-A publisher (the fleet launcher's observer, on the fleet's event loop) replaces the snapshot;
+A publisher (the fleet launcher's observer: on the fleet's event loop in process, on the
+observer endpoint's thread for robot processes) replaces the snapshot;
 readers (the page server's WebSocket loops, on their own thread) take the newest one when they
 are ready for it. Nothing queues: a slow page skips snapshots, a fast fleet never waits. The
 snapshot is serialized once per version, outside the publisher's hot path only when read.
