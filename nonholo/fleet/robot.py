@@ -508,7 +508,6 @@ class RobotProgram:
                                                 "at": now})
                 self.states[k] = x, y, theta, xi
                 self.helds[k] = held
-                self.k = k
             self.elapsed_s = time.perf_counter() - started
             for parent in s.parents:
                 await self._send(parent, msg.act("cancel", s.name, parent, msg.conversation(s.name, parent)))

@@ -36,6 +36,8 @@ from collections import Counter
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
+
 from nonholo.comm.channel import SecureChannel
 from nonholo.comm.envelope import Opener, Sealer
 from nonholo.comm.errors import CommError, ContentError
@@ -81,6 +83,18 @@ def program_pose(program, k: int) -> tuple[float, float, float]:
         return tuple(float(v) for v in program.setup.start[:3])
     x, y, theta, _ = program.states[k]
     return float(x), float(y), float(theta)
+
+
+def program_step(program) -> int:
+    """The newest output step a program has filled (-1 before the first): its ``k``; a
+    realtime run counts its control instants."""
+    k = int(getattr(program, "k", -1))
+    if k < 0 and getattr(program, "realtime", False):
+        if program.elapsed_s:          # the run is over
+            return program.setup.n_steps
+        instants = int(np.count_nonzero(program.ticks))
+        k = min((instants - 1) * program.setup.hold_every, program.setup.n_steps) if instants else -1
+    return k
 
 
 def held_pose(program):
@@ -129,7 +143,7 @@ def robot_status(program, parent_pose=None) -> dict:
     ``parent_pose(parent, k)`` gives a parent's pose for the link errors (default: the
     parent states the program holds)."""
     s = program.setup
-    k = int(getattr(program, "k", -1))
+    k = program_step(program)
     x, y, theta = program_pose(program, k)
     v, w = (float(program.helds[k, 0]), float(program.helds[k, 1])) if k >= 0 else (0.0, 0.0)
     e1, e2 = link_errors(program, k, (x, y, theta), parent_pose or held_pose(program))
