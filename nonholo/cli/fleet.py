@@ -49,12 +49,13 @@ def handle(args: argparse.Namespace) -> int:
         source = examples.resolve(args.scenario)
         overrides = {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
         scenario, config = load_fleet(source, overrides)
-        watched = viewing.speed is not None
-        transport = args.transport or ("inproc" if watched else config.transport)   # a live view watches in process
+        config = viewing.network(config, scenario.names)      # --keys, --observe
+        transport = args.transport or config.transport
         viewing.start()
         with signals_interrupt():   # SIGTERM, SIGHUP: every robot process reaped, as on Ctrl-C
             run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
-                            overrides=overrides, observer=viewing.observer, speed=viewing.speed)
+                            overrides=overrides, observer=viewing.observer, speed=viewing.speed,
+                            observe=viewing.observe)
     except NonholoInputError as exc:
         viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)

@@ -54,6 +54,11 @@ def register(subparsers) -> None:
     parser.add_argument("--wait", type=float, default=20.0, metavar="S",
                         help="longest wait for a peer before giving up (default 20)")
     parser.add_argument("--trace", metavar="FILE", help="write states, commands and the report (.npz)")
+    parser.add_argument("--observe", metavar="HOST:PORT",
+                        help="stream this robot's status to a viewer attached there (nonholo view SCENARIO "
+                             "--attach HOST:PORT --keys FILE); authenticated with the robot's key")
+    parser.add_argument("--speed", type=float, metavar="X",
+                        help="lockstep: pace logical time at X times wall time (default: unpaced)")
     add_simulation_overrides(parser)
     parser.set_defaults(handler=handle)
 
@@ -84,8 +89,9 @@ def handle(args: argparse.Namespace) -> int:
         if not 0 < args.wait <= 3600:
             raise NonholoInputError(f"--wait: expected seconds in (0, 3600], got {args.wait:g}")
         transport = args.transport or ("zenoh" if config.transport == "zenoh" else "tcp")
+        check_watching(args)
         options = RobotOptions(args.name, keys, args.listen, tuple(connect), args.wait, args.listen_fd, args.mode,
-                               transport)
+                               transport, observe=args.observe, speed=args.speed)
         program = robot_main(scenario, config, options, args.trace, announce)
     except NonholoInputError as exc:
         print(f"nonholo robot: {exc}", file=sys.stderr)
@@ -96,3 +102,14 @@ def handle(args: argparse.Namespace) -> int:
     print(f"robot {args.name}: {len(program.setup.control_steps)} control steps in {program.elapsed_s:.3f} s",
           file=sys.stderr)
     return EXIT_OK
+
+
+def check_watching(args: argparse.Namespace) -> None:
+    """--observe HOST:PORT and --speed X (positive), or NonholoInputError naming the option."""
+    from nonholo.errors import NonholoInputError
+    from nonholo.fleet.mesh import split_address
+
+    if args.observe is not None:
+        split_address(args.observe, "--observe")
+    if args.speed is not None and not 0 < args.speed < float("inf"):
+        raise NonholoInputError(f"--speed must be a positive number, got {args.speed}")

@@ -1,4 +1,5 @@
-"""``nonholo view SOURCE``: replay a recording or an --out directory in the browser."""
+"""``nonholo view SOURCE``: replay a recording or an --out directory in the browser, or
+(``--attach``) show a fleet of robot processes live."""
 from __future__ import annotations
 
 import argparse
@@ -13,14 +14,28 @@ MAX_PORT = 65535
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "view", help="replay a recording (.mcap) or an --out directory in the browser",
+        "view", help="replay a recording (.mcap) or an --out directory, or watch a running fleet (--attach)",
         description="Serve a page that replays a run: robots' poses and trails, the reference path, formation "
                     "links with their errors, with a time slider, play/pause, zoom and follow-a-robot. SOURCE is "
                     "an MCAP file written with --record, or the --out directory of `nonholo run` (result.json "
-                    "and trajectories.csv). The page is read-only, on 127.0.0.1 by default, and needs the random "
+                    "and trajectories.csv). With --attach HOST:PORT, SOURCE is the fleet's scenario and the page "
+                    "shows live the robots that stream their status there (`nonholo fleet SCENARIO --observe "
+                    "HOST:PORT --keys FILE`, or `nonholo robot ... --observe HOST:PORT`), authenticated with the "
+                    "fleet's key file. The page is read-only, on 127.0.0.1 by default, and needs the random "
                     "token printed in its address. Ctrl-C stops it.",
-        epilog="Exit codes: 0 ok, 1 the server could not start, 2 bad input.")
-    parser.add_argument("source", help="a .mcap recording, or a directory written by nonholo run --out")
+        epilog="Exit codes: 0 ok, 1 the server could not start, 2 bad input. Example: nonholo fleet "
+               "formation-chain --observe 127.0.0.1:7500 --keys fleet.keys, then nonholo view formation-chain "
+               "--attach 127.0.0.1:7500 --keys fleet.keys")
+    parser.add_argument("source", help="a .mcap recording, or a directory written by nonholo run --out; with "
+                                       "--attach, the fleet's scenario (.toml or a bundled example)")
+    parser.add_argument("--attach", metavar="HOST:PORT",
+                        help="receive the status of a running fleet's robots on HOST:PORT (port 0: a free one, "
+                             "printed) and show them live")
+    parser.add_argument("--keys", metavar="FILE",
+                        help="with --attach: the fleet's key file (default the scenario's [network] keys)")
+    from nonholo.cli.robot import add_simulation_overrides
+
+    add_simulation_overrides(parser)
     add_server_arguments(parser)
     parser.set_defaults(handler=handle)
 
@@ -75,14 +90,25 @@ def serve_until_stopped(server, seconds: float | None) -> None:
         server.stop()
 
 
+def overrides(args: argparse.Namespace) -> dict:
+    return {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
+
+
 def handle(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from nonholo.errors import NonholoInputError
     from nonholo.view import require
 
+    if args.attach is not None:
+        return handle_attach(args)
     source = Path(args.source)
     try:
+        flags = {"--keys": args.keys, "--duration": args.duration, "--dt": args.dt,
+                 "--control-period": args.control_period}
+        given = [flag for flag, value in flags.items() if value is not None]
+        if given:
+            raise NonholoInputError(f"{given[0]}: only with --attach (it describes a running fleet)")
         check_server_arguments(args)
         require("aiohttp")
         if source.is_dir():
@@ -110,32 +136,132 @@ def handle(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def attach_inputs(args: argparse.Namespace) -> tuple:
+    """(scenario, the fleet's keys by robot, (host, port)) for --attach; NonholoInputError
+    naming the option otherwise."""
+    from nonholo import examples
+    from nonholo.errors import NonholoInputError
+    from nonholo.fleet.config import load_fleet
+    from nonholo.fleet.keys import keys_from_file
+    from nonholo.fleet.mesh import split_address
+
+    host, port = split_address(args.attach, "--attach")
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        raise NonholoInputError(f"--attach: HOST must be an IP address such as 127.0.0.1, got {host!r}"[:200]) \
+            from None
+    scenario, config = load_fleet(examples.resolve(args.source), overrides(args))
+    keys = args.keys or config.keys
+    if keys is None:
+        raise NonholoInputError("--keys: attaching needs the fleet's key file (the one its robots use; or set "
+                                "[network] keys)")
+    return scenario, keys_from_file(keys, scenario.names, scenario.names), (host, port)
+
+
+def handle_attach(args: argparse.Namespace) -> int:
+    """``nonholo view SCENARIO --attach HOST:PORT``: the live page of robots streaming there."""
+    from nonholo.errors import NonholoInputError
+    from nonholo.fleet.setup import robot_setups
+    from nonholo.fleet.telemetry import ObserverThread
+    from nonholo.view import require
+    from nonholo.view.feed import FleetObserver, LatestFeed
+
+    try:
+        check_server_arguments(args)
+        require("aiohttp")
+        scenario, keys, (host, port) = attach_inputs(args)
+        observer = FleetObserver(LatestFeed())
+        observer.prepare(scenario, robot_setups(scenario))
+    except NonholoInputError as exc:
+        print(f"nonholo view: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        endpoint = ObserverThread(keys, observer.status, host, port).start()
+    except OSError as exc:
+        print(f"nonholo view: --attach: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    try:
+        server = start_server(None, observer.feed, args, "nonholo view")
+    except OSError as exc:
+        endpoint.stop()
+        print(f"nonholo view: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    print(f"attached on {endpoint.address}: robots with --observe {endpoint.address} show up (Ctrl-C stops)",
+          file=sys.stderr, flush=True)
+    try:
+        serve_until_stopped(server, args.serve_for)
+    finally:
+        endpoint.stop()
+    return EXIT_OK
+
+
 def add_fleet_view_arguments(parser: argparse.ArgumentParser) -> None:
     """``--record``, ``--view``, ``--speed`` and the server's options, for ``nonholo fleet``."""
     parser.add_argument("--record", metavar="FILE.mcap", help="write an MCAP recording of the run (see nonholo run)")
     parser.add_argument("--view", action="store_true",
                         help="serve a live page of the fleet while it runs (its address, with a token, is printed "
-                             "on stderr at start); after the run the page replays it until Ctrl-C or --for S")
+                             "on stderr at start; robot processes stream their status to it); after the run the "
+                             "page replays it until Ctrl-C or --for S")
+    parser.add_argument("--observe", metavar="HOST:PORT",
+                        help="robot processes stream their status to HOST:PORT, where `nonholo view SCENARIO "
+                             "--attach HOST:PORT --keys FILE` shows them (needs --keys or [network] keys)")
+    parser.add_argument("--keys", metavar="FILE",
+                        help="the fleet's key file (mode 0600; key id i+1 is robot i), created with a fresh key "
+                             "per robot if it does not exist (default [network] keys, else fresh keys per run)")
     parser.add_argument("--foxglove", type=int, nargs="?", const=8765, metavar="PORT",
                         help="also serve the fleet live to Foxglove on ws://127.0.0.1:PORT (default 8765; "
                              "loopback only: that protocol has no token); needs nonholo[foxglove]")
     parser.add_argument("--speed", type=float, metavar="X",
-                        help="pace logical time at X times wall time (default: 1 with --view or --foxglove, "
-                             "else unpaced)")
+                        help="pace logical time at X times wall time (default: 1 with --view, --observe or "
+                             "--foxglove, else unpaced; a realtime run keeps the wall clock)")
     add_server_arguments(parser)
 
 
 class FleetViewing:
-    """The live page and the recording of a ``nonholo fleet`` run: ``start()`` before the
-    run (checks the options, starts the server), ``observer`` and ``speed`` for the
-    launcher, ``finish(run, summary)`` after it (the recording, the page's replay),
-    ``serve()`` at the end (until Ctrl-C or --for), ``stop()`` on any failure."""
+    """The live page and the recording of a ``nonholo fleet`` run: ``network(config,
+    names)`` applies --keys and checks --observe, ``start()`` before the run (checks the
+    options, starts the server), ``observer``, ``observe`` and ``speed`` for the launcher,
+    ``finish(run, summary)`` after it (the recording, the page's replay), ``serve()`` at the
+    end (until Ctrl-C or --for), ``stop()`` on any failure."""
 
     def __init__(self, args: argparse.Namespace, prog: str) -> None:
         self.args, self.prog = args, prog
         self.observer = self.server = self.bridge = None
-        watched = args.view or args.foxglove is not None
+        self.observe = args.observe
+        watched = args.view or args.foxglove is not None or args.observe is not None
         self.speed = args.speed if args.speed is not None else (1.0 if watched else None)
+
+    def network(self, config, names):
+        """``config`` ([network]) with --keys (a missing file is made with fresh keys)."""
+        import dataclasses
+        from pathlib import Path
+
+        from nonholo.errors import NonholoInputError
+        from nonholo.fleet.keys import write_fleet_key_file
+        from nonholo.fleet.mesh import split_address
+
+        args = self.args
+        if args.observe is not None:
+            if args.view:
+                raise NonholoInputError("--observe: with --view the fleet's own page observes it; give one of them")
+            split_address(args.observe, "--observe")
+            if (args.transport or config.transport) == "inproc":
+                raise NonholoInputError("--observe: robot processes send their status there; with --transport "
+                                        "inproc use --view")
+        if args.keys:
+            path = Path(args.keys)
+            if not path.exists():
+                try:
+                    write_fleet_key_file(path, names)
+                except OSError as exc:
+                    raise NonholoInputError(f"--keys: cannot create {path}: {exc.strerror or exc}") from None
+                print(f"{self.prog}: wrote {path} (a fresh key per robot)", file=sys.stderr)
+            config = dataclasses.replace(config, keys=path)
+        if args.observe is not None and config.keys is None:
+            raise NonholoInputError("--observe: a viewer attaching needs the fleet's key file: give --keys FILE "
+                                    "(created if missing)")
+        return config
 
     def start(self) -> None:
         from nonholo.errors import NonholoInputError

@@ -12,6 +12,7 @@ Layers, each importing only those above it::
     keys      a fleet's keys (one per robot) and a robot's secure channel
     mesh      a robot's authenticated TCP links to its parents and children (comm layers)
     robot     the robot program: subscribe, control loop (lockstep, realtime), publish
+    telemetry a robot's status streamed to an observer (a live view), and its endpoint
     process   one robot program as its own OS process (``nonholo robot``)
     spawn     one process per robot, every process reaped
     report    the link-health figure and the network table

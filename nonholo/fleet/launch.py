@@ -25,6 +25,7 @@ from nonholo.fleet.process import make_plant, read_trace, run_program
 from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
 from nonholo.fleet.spawn import start_robot_processes
+from nonholo.fleet.telemetry import paced_clock, watched_processes
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
@@ -46,23 +47,28 @@ class FleetRun:
 
 def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep", wait_s: float = 20.0,
               config: NetworkConfig | None = None, source: Path | None = None,
-              overrides: dict | None = None, observer=None, speed: float | None = None) -> FleetRun:
+              overrides: dict | None = None, observer=None, speed: float | None = None,
+              observe: str | None = None) -> FleetRun:
     """Run ``scenario`` as a fleet. Robot processes (``tcp``) read the scenario from the
     file ``source`` with ``overrides`` ({"duration", "dt", "control_period"}) applied, which
     must give ``scenario``.
 
-    In process only (``inproc``): ``observer``, a callable given the robot programs every
-    ``observer.period_s`` s of wall time while they run and once at the end (it must not
-    block: a live view publishes a snapshot), whose ``prepare(scenario, setups)``, if any, is
-    called before the robots start; ``speed``: pace the logical time at this many times wall
-    time (None: as fast as the robots go)."""
+    ``observer`` (a live view; ``nonholo.view.feed.FleetObserver``): its
+    ``prepare(scenario, setups)``, if any, is called before the robots start; in process it
+    is called with the robot programs every ``observer.period_s`` s of wall time while they
+    run and once at the end; robot processes send their statuses to an observer endpoint
+    that hands each to ``observer.status(name, status)`` (``nonholo.fleet.telemetry``). It
+    must not block: a live view publishes a snapshot. ``speed``: pace the logical time of a
+    lockstep run at this many times wall time (None: as fast as the robots go).
+    ``observe`` ("host:port", robot processes only): the robots send their statuses there,
+    to a viewer attached there (``nonholo view --attach``)."""
     if transport not in TRANSPORTS:
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
         raise NonholoInputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-    if (observer is not None or speed) and transport != "inproc":
-        raise NonholoInputError(f"a live view watches robot programs in this process: use --transport inproc, "
-                                f"not {transport}")
+    if observe is not None and transport == "inproc":
+        raise NonholoInputError("--observe: robot processes send their status there; with --transport inproc "
+                                "use --view")
     config = config or NetworkConfig(transport=transport)
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
@@ -72,9 +78,9 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     helds = np.zeros((n, kn.HELD_COUNT, len(scenario.robots)))
     index = {name: i for i, name in enumerate(scenario.names)}
     reports = []
+    if observer is not None and hasattr(observer, "prepare"):
+        observer.prepare(scenario, setups)
     if transport == "inproc":
-        if observer is not None and hasattr(observer, "prepare"):
-            observer.prepare(scenario, setups)
         for program in asyncio.run(_inproc(scenario, setups, config, mode, wait_s, observer, speed)):
             states[:, :, program.setup.index] = program.states
             helds[:, :, program.setup.index] = program.helds
@@ -87,20 +93,24 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
         if mode == "realtime":
             run_s += scenario.duration
-        robots = start_robot_processes(Path(source), scenario, config.keys, overrides or {}, wait_s,
-                                       extra={name: ["--mode", mode] for name in scenario.names},
-                                       transport=transport,
-                                       failover=config.order if config.failover and mode == "realtime" else ())
-        try:   # whatever happens (a failure, Ctrl-C, SIGTERM), every process is reaped and the folder goes
-            robots.wait(run_s)
-            robots.stop_all()
-            for name in scenario.names:
-                robot_states, robot_helds, report = read_trace(robots.workdir / f"{name}.npz")
-                states[:, :, index[name]] = robot_states
-                helds[:, :, index[name]] = robot_helds
-                reports.append(report)
-        finally:
-            robots.discard()
+        elif speed:
+            run_s += scenario.duration / speed
+        pace = speed if mode == "lockstep" else None
+        with watched_processes(observer, scenario.names, config.keys, observe, pace) as (keys, options):
+            robots = start_robot_processes(Path(source), scenario, keys, overrides or {}, wait_s,
+                                           extra={name: ["--mode", mode, *options] for name in scenario.names},
+                                           transport=transport,
+                                           failover=config.order if config.failover and mode == "realtime" else ())
+            try:   # whatever happens (a failure, Ctrl-C, SIGTERM), every process is reaped and the folder goes
+                robots.wait(run_s)
+                robots.stop_all()
+                for name in scenario.names:
+                    robot_states, robot_helds, report = read_trace(robots.workdir / f"{name}.npz")
+                    states[:, :, index[name]] = robot_states
+                    helds[:, :, index[name]] = robot_helds
+                    reports.append(report)
+            finally:
+                robots.discard()
     elapsed = time.perf_counter() - started
     result = score_states(scenario, planned, states, helds, elapsed)
     network = network_report(reports, transport, mode, elapsed, scenario)
@@ -147,19 +157,6 @@ async def _inproc(scenario: Scenario, setups: dict, config: NetworkConfig, mode:
                   speed: float | None = None) -> list[RobotProgram]:
     return await run_programs(inproc_programs(scenario, setups, config, mode, wait_s, InProcNetwork()), mode, config,
                               observer, speed)
-
-
-def paced_clock(speed: float):
-    """An awaitable clock: returns once wall time since its first call reaches t / speed."""
-    start = []
-
-    async def clock(t: float) -> None:
-        if not start:
-            start.append(time.monotonic())
-        delay = start[0] + t / speed - time.monotonic()
-        if delay > 0:
-            await asyncio.sleep(delay)
-    return clock
 
 
 async def _observe(observer, programs) -> None:

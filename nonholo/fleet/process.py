@@ -23,6 +23,7 @@ from nonholo.fleet.mesh import RobotLinks, split_address
 from nonholo.fleet.plant import SimulatedUnicycle, WallClockUnicycle
 from nonholo.fleet.robot import DEFAULT_WAIT_S, Failover, LinkPlan, RobotProgram
 from nonholo.fleet.setup import robot_setups
+from nonholo.fleet.telemetry import watch_robot
 from nonholo.sim.scenario import Scenario
 
 
@@ -39,6 +40,8 @@ class RobotOptions:
     listen_fd: int | None = None    # a listening socket inherited from the launcher
     mode: str = "lockstep"          # lockstep | realtime
     transport: str = "tcp"          # tcp | zenoh (addresses then Zenoh endpoints, "tcp/host:port")
+    observe: str | None = None      # "host:port" of an observer to stream the robot's status to
+    speed: float | None = None      # lockstep: pace logical time at this many times wall time
 
 
 ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic")
@@ -117,12 +120,15 @@ async def run_robot(scenario: Scenario, config: NetworkConfig, options: RobotOpt
     program = RobotProgram(setup, plant, links, robot_channel(options.name, peers, keys), limits, options.wait_s,
                            LinkPlan(config.link, config.seed), config.watchdog, handover)
     program.on_event = log_event
+    telemetry = watch_robot(program, options.observe, options.speed, keys[options.name])
     try:
         port = await links.start() if isinstance(links, RobotLinks) else None
         if announce is not None:
             announce(port)
         await run_program(program, options.mode, config, on_start=announce_running(options.name))
     finally:
+        if telemetry is not None:
+            await telemetry.close()
         await links.close()
     return program
 

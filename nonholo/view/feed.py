@@ -1,6 +1,7 @@
 """The live feed: the newest snapshot of a running fleet, latest wins.
 
-A publisher (the fleet launcher's observer, on the fleet's event loop) replaces the snapshot;
+A publisher (the fleet launcher's observer: on the fleet's event loop in process, on the
+observer endpoint's thread for robot processes) replaces the snapshot;
 readers (the page server's WebSocket loops, on their own thread) take the newest one when they
 are ready for it. Nothing queues: a slow page skips snapshots, a fast fleet never waits. The
 snapshot is serialized once per version, outside the publisher's hot path only when read.
@@ -8,12 +9,10 @@ snapshot is serialized once per version, outside the publisher's hot path only w
 from __future__ import annotations
 
 import json
-import math
 import threading
 import time
 
-from nonholo.models.formation_geometry import separation_bearing, wrap
-from nonholo.sim.kernel import OFFSET_D
+from nonholo.fleet.telemetry import program_pose, robot_status
 
 OBSERVE_PERIOD_S = 0.05    # the launcher samples the fleet at 20 Hz (wall time)
 
@@ -62,15 +61,6 @@ class LatestFeed:
             return self._final if self._final is not None else self._setup
 
 
-def _newest(samples):
-    """The newest of a program's latency samples (realtime runs measure them), or None."""
-    return samples[-1] if samples else None
-
-
-def _number(value) -> float | None:
-    return None if value is None or not math.isfinite(value) else round(float(value), 6)
-
-
 def live_setup(scenario, setups: dict, title: str = "") -> dict:
     """The static part of a live page: robots, links and the reference path."""
     from nonholo.view.data import link_table, robot_descriptors
@@ -86,18 +76,24 @@ def live_setup(scenario, setups: dict, title: str = "") -> dict:
 
 
 class FleetObserver:
-    """Samples a running fleet (its robot programs) into ``feed`` snapshots: per robot its
-    newest pose and step; per link parent→child the follower's output errors, the age of the
-    newest parent state it holds (logical time), frames sent, received, rejected and in flight
-    (sent, not yet received: in flight or lost; the run's report tells them apart at the end),
-    the latency when the program measures one (``latency_s`` per parent); per robot its
-    state (``watchdog`` when the program has one, else running/done)."""
+    """Builds ``feed`` snapshots of a running fleet from its robots' statuses
+    (``nonholo.fleet.telemetry.robot_status``): per robot its newest pose and step and its
+    state (starting, running, done or its watchdog's mode); per link parent→child the
+    follower's output errors, the age of the newest parent state it holds, the newest latency
+    (realtime), frames sent, received, rejected and in flight (sent, not yet received: in
+    flight or lost; the run's report tells them apart at the end).
+
+    In process the launcher calls it with the robot programs every ``period_s``; a fleet of
+    robot processes sends each robot's status to ``status(name, status)`` (from the observer
+    endpoint's thread, ``nonholo.fleet.telemetry``)."""
 
     period_s = OBSERVE_PERIOD_S
 
     def __init__(self, feed: LatestFeed) -> None:
         self.feed = feed
         self.started = time.monotonic()
+        self.statuses: dict[str, dict] = {}
+        self._lock = threading.Lock()
 
     def prepare(self, scenario, setups: dict) -> None:
         """Called by the launcher before the robots start."""
@@ -107,54 +103,36 @@ class FleetObserver:
     def __call__(self, programs) -> None:
         self.feed.publish(fleet_snapshot(programs, self.started))
 
-
-def _pose(program, k: int):
-    if k < 0:
-        return tuple(float(v) for v in program.setup.start[:3])
-    x, y, theta, _ = program.states[k]
-    return float(x), float(y), float(theta)
+    def status(self, name: str, status: dict) -> None:
+        with self._lock:
+            self.statuses[name] = status
+            snapshot = merge_statuses(self.statuses, self.started)
+        self.feed.publish(snapshot)
 
 
 def fleet_snapshot(programs, started: float) -> dict:
-    """A JSON-ready snapshot of robot programs (``nonholo.fleet.robot.RobotProgram``)."""
+    """A JSON-ready snapshot of robot programs in this process (``nonholo.fleet.robot.RobotProgram``):
+    a follower's errors against its parents' poses at the same step."""
     by_name = {p.setup.name: p for p in programs}
+
+    def parent_pose(parent: str, k: int):
+        return program_pose(by_name[parent], k)
+    return merge_statuses({p.setup.name: robot_status(p, parent_pose) for p in programs}, started)
+
+
+def merge_statuses(statuses: dict, started: float) -> dict:
+    """One snapshot of the robots' newest statuses (by name): a link's frames in flight are
+    its parent's sent less its child's received and rejected."""
     robots, links, states = {}, {}, {}
     t = 0.0
-    for program in programs:
-        s = program.setup
-        k = int(getattr(program, "k", -1))
-        x, y, theta = _pose(program, k)
-        v, omega = (float(program.helds[k, 0]), float(program.helds[k, 1])) if k >= 0 else (0.0, 0.0)
-        robots[s.name] = {"x": x, "y": y, "theta": theta, "v": v, "omega": omega, "k": k}
-        t = max(t, k * s.dt)
-        guard = getattr(program, "guard", None)   # the watchdog's state (nonholo.fleet.watchdog)
-        stopping = guard is not None and s.parents and guard.mode != "following"
-        states[s.name] = "stopping" if stopping else ("done" if k >= s.n_steps else ("running" if k >= 0 else "starting"))
-        if not s.parents:
-            continue
-        errors = (None, None)
-        if k >= 0:
-            d = float(s.fields[OFFSET_D])
-            follower = (x, y, theta)
-            parents = [by_name[p] for p in s.parents]
-            target = s.targets[k]
-            if len(parents) == 1:
-                l, phi, _ = separation_bearing(_pose(parents[0], k), follower, d)
-                errors = (float(l) - target[0], float(wrap(float(phi) - target[1])))
-            else:
-                l1 = float(separation_bearing(_pose(parents[0], k), follower, d)[0])
-                l2 = float(separation_bearing(_pose(parents[1], k), follower, d)[0])
-                errors = (l1 - target[0], l2 - target[1])
-        for parent in s.parents:
-            sender = by_name[parent]
-            newest = program.latest.get(parent)
-            received = program.tally.received[parent]
-            sent = sender.tally.sent[s.name]
-            links[f"{parent}->{s.name}"] = {
-                "e1": _number(errors[0]), "e2": _number(errors[1]),
-                "age_s": _number((k - newest.k) * s.dt) if newest is not None and k >= 0 else None,
-                "latency_s": _number(_newest(getattr(program, "latency", {}).get(parent))),
-                "sent": sent, "received": received, "rejected": program.tally.rejected[parent],
-                "in_flight": max(0, sent - received - program.tally.rejected[parent])}
+    for name, status in statuses.items():
+        x, y, theta = status["pose"]
+        robots[name] = {"x": x, "y": y, "theta": theta, "v": status["v"], "omega": status["w"], "k": status["k"]}
+        states[name] = status["state"]
+        t = max(t, status["t"] or 0.0)
+        for parent, link in status["links"].items():
+            sent = statuses.get(parent, {}).get("sent", {}).get(name)
+            in_flight = None if sent is None else max(0, sent - link["received"] - link["rejected"])
+            links[f"{parent}->{name}"] = {**link, "sent": sent, "in_flight": in_flight}
     return {"t": round(t, 6), "wall_s": round(time.monotonic() - started, 3), "robots": robots, "links": links,
             "states": states, "done": False}
