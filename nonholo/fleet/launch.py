@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +27,7 @@ from nonholo.fleet.robot import LinkPlan, RobotProgram, quantiles
 from nonholo.fleet.setup import robot_setups
 from nonholo.fleet.spawn import run_robot_processes
 from nonholo.sim import kernel as kn
+from nonholo.sim.links import LinkSettings
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
@@ -67,7 +68,13 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     if (observer is not None or speed) and transport != "inproc":
         raise NonholoInputError(f"a live view watches robot programs in this process: use --transport inproc, "
                                 f"not {transport}")
-    config = config or NetworkConfig(transport=transport)
+    if config is None:   # the scenario's own link model (Scenario.network), if any
+        links = scenario.network or LinkSettings()
+        config = NetworkConfig(transport=transport, seed=links.seed, watchdog=links.watchdog, default=links.default,
+                               links=dict(links.links))
+    if scenario.network != config.link_settings:
+        # The centralized run the fleet equals plans its sub-steps with the links the robots apply.
+        scenario = replace(scenario, network=config.link_settings)
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
     started = time.perf_counter()

@@ -127,7 +127,7 @@ def fleet_snapshot(programs, started: float) -> dict:
         v, omega = (float(program.helds[k, 0]), float(program.helds[k, 1])) if k >= 0 else (0.0, 0.0)
         robots[s.name] = {"x": x, "y": y, "theta": theta, "v": v, "omega": omega, "k": k}
         t = max(t, k * s.dt)
-        guard = getattr(program, "guard", None)   # the watchdog's state (nonholo.fleet.watchdog)
+        guard = getattr(program, "guard", None)   # the watchdog's state (nonholo.sim.watchdog)
         stopping = guard is not None and s.parents and guard.mode != "following"
         states[s.name] = "stopping" if stopping else ("done" if k >= s.n_steps else ("running" if k >= 0 else "starting"))
         if not s.parents:
