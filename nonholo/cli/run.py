@@ -49,12 +49,11 @@ def handle(args: argparse.Namespace) -> int:
         from nonholo.sim.simulator import check_network, simulate
 
         # [network]: its link model applies here as in a lockstep fleet (it needs control_period);
-        # the whole table is checked as `nonholo fleet` checks it.
+        # the whole table is checked as `nonholo fleet` checks it (a misspelt field is not ignored).
         check_network([scenario])
-        if scenario.network is not None:
-            from nonholo.fleet.config import load_fleet
+        from nonholo.fleet.config import load_fleet
 
-            load_fleet(source)
+        load_fleet(source)
 
         if args.every < 1:
             raise NonholoInputError(f"--every must be a positive integer, got {args.every}")

@@ -285,8 +285,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     * ``integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds,
       order, parents, feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start,
       k_stop, n_steps, stats, pair_stats, record, held, step_rate, held_given)``: the time loop;
-      with ``held_given`` the commands held from a control instant at ``k_start`` are those
-      already in ``held`` (the link model's step sets them, ``nonholo.sim.linkstep``);
+      with ``held_given`` a control instant keeps the commands already in ``held`` (the caller
+      sets them, running one control period per call: the link step, ``nonholo.sim.linkstep``);
     * ``evaluate(state, fields, limits, ref_row, targets, target_row, offsets, kinds, order,
       parents, branch, sin_floor, instant)``: every robot's command and outputs at one
       instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``);

@@ -435,6 +435,8 @@ def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
     estimate = 8.0 * robots * ((kn.REC_COUNT * samples if record else 0) + kn.STAT_COUNT + 64)
     substeps = scenario.substeps or 1   # the reference rows at every stage time
     estimate += 8.0 * 10 * 2 * substeps * samples
+    if scenario.hold_every and scenario.network is not None and not scenario.network.ideal:
+        estimate += 8.0 * 2 * robots * (samples // scenario.hold_every + 1)   # the links' schedules
     if estimate > MAX_BYTES:
         raise NonholoInputError(
             f"this run would need about {estimate / 2**30:.3g} GiB ({robots} robots x {samples} samples"
