@@ -12,9 +12,9 @@ from nonholo.comm.transports.inproc import InProcNetwork
 from nonholo.fleet.config import NetworkConfig, load_fleet, with_overrides
 from nonholo.fleet.keys import fleet_keys
 from nonholo.fleet.launch import inproc_programs, run_fleet, run_programs
-from nonholo.fleet.links import LOST, LinkModel, link_draws, link_schedule, newest_usable, usable_instants
+from nonholo.sim.links import LOST, LinkModel, link_draws, link_schedule, newest_usable, usable_instants
 from nonholo.fleet.setup import robot_setups
-from nonholo.fleet.watchdog import WatchdogConfig, WatchdogState, watchdog_step
+from nonholo.sim.watchdog import WatchdogConfig, WatchdogState, watchdog_step
 from test_fleet_tcp import OVERRIDES, example_text
 
 

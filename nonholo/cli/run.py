@@ -16,7 +16,9 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "run", help="simulate a scenario file",
         description="Simulate the robots of a scenario (TOML file or bundled example) and report error "
-                    "statistics on the uniform grid t_k = k*dt.",
+                    "statistics on the uniform grid t_k = k*dt. A [network] link model (delay, jitter, loss, "
+                    "seed, watchdog) applies to sampled-data runs as in `nonholo fleet --mode lockstep`, which "
+                    "this run then equals.",
         epilog=f"bundled examples: {', '.join(examples.names())}. Exit codes: 0 ok, 1 failure, 2 bad input.")
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -42,8 +44,16 @@ def handle(args: argparse.Namespace) -> int:
     from nonholo.sim.files import load_scenario
 
     try:
-        scenario = load_scenario(examples.resolve(args.scenario))
-        from nonholo.sim.simulator import simulate
+        source = examples.resolve(args.scenario)
+        scenario = load_scenario(source)
+        from nonholo.sim.simulator import check_network, simulate
+
+        # [network]: its link model applies here as in a lockstep fleet (it needs control_period);
+        # the whole table is checked as `nonholo fleet` checks it (a misspelt field is not ignored).
+        check_network([scenario])
+        from nonholo.fleet.config import load_fleet
+
+        load_fleet(source)
 
         if args.every < 1:
             raise NonholoInputError(f"--every must be a positive integer, got {args.every}")
@@ -160,6 +170,12 @@ def format_summary(summary: dict) -> str:
         notes.append(f"closest pair {' / '.join(safety['min_distance_pair'])}: {safety['min_distance']:.4g} m at "
                      f"t = {safety['min_distance_time']:.4g} s; {safety['time_below_2d']:.4g} s closer than "
                      f"2d = {safety['two_d']:g} m")
+    links = sim.get("link_model")
+    if links:
+        w = links["watchdog"]
+        overrides = f", {len(links['links'])} link(s) overridden" if links["links"] else ""
+        notes.append(f"link model (seed {links['seed']}): delay {links['delay']:g} s + jitter up to {links['jitter']:g} "
+                     f"s, loss {links['loss']:g}{overrides}; watchdog stops a follower beyond {w['stale_after']:g} s")
     lines += notes
     lines.append("errors on the uniform output grid; peak v in m/s, peak w in rad/s")
     # long names and notes wrap (continuation lines indented): the terminal output fits 100 columns

@@ -6,9 +6,11 @@ Layers, each importing only those above it::
     setup     what one robot needs from a scenario (its law, parents, plan, tables)
     plant     the plant interface (read pose, command v and ω) and the simulated unicycles
     messages  the robot-state content of the ``leader-follower-v1`` ontology
-    links     the link model: one seeded draw of delays and losses (pure)
-    watchdog  the follower's watchdog (pure state machine)
     config    the scenario's ``[network]`` table
+
+The link model (one seeded draw of delays and losses) and the follower's watchdog (a pure
+state machine) live a layer below, in ``nonholo.sim.links`` and ``nonholo.sim.watchdog``:
+the centralized simulator applies them too, so that ``nonholo run`` predicts a lockstep run.
     keys      a fleet's keys (one per robot) and a robot's secure channel
     mesh      a robot's authenticated TCP links to its parents and children (comm layers)
     robot     the robot program: subscribe, control loop (lockstep, realtime), publish

@@ -1,5 +1,9 @@
 """The ``[network]`` table of a scenario: how a fleet's robots reach each other, their
-keys, the link model (spec fleet.md §3–4) and the watchdog (§5).
+keys, the link model (spec fleet.md §3–4) and the watchdog (§5). The link model's fields
+(seed, delay, jitter, loss, reorder, links, the watchdog's) are read by
+``nonholo.sim.links.read_link_settings``, for the centralized simulator
+(``Scenario.network``) and for the fleet alike; this module reads the rest and bounds the
+delays (in control periods: a lockstep robot's inboxes are bounded).
 
     [network]
     transport = "tcp"              # tcp | zenoh | inproc
@@ -30,17 +34,17 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from nonholo.errors import InputFileError, ScenarioError
-from nonholo.fleet.links import IDEAL, LinkModel
-from nonholo.fleet.watchdog import WatchdogConfig
+from nonholo.sim import links as link_fields
+from nonholo.sim.links import IDEAL, LinkModel, LinkSettings, read_link_settings
+from nonholo.sim.watchdog import WatchdogConfig
 from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Scenario
 from nonholo.tomlfile import describe_value, read_toml
 
 TRANSPORTS = ("tcp", "zenoh", "inproc")
 MODES = ("lockstep", "realtime")   # logical time, or the wall clock
-LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
-FIELDS = {"transport", "keys", "seed", "stale_after", "resume_after", "decel_v", "decel_omega", "predict",
-          "addresses", "links", "failover", "order", "failover_after", *LINK_FIELDS}
+LINK_FIELDS = link_fields.LINK_FIELDS
+FIELDS = {"transport", "keys", "predict", "addresses", "failover", "order", "failover_after", *link_fields.FIELDS}
 MAX_DELAY_PERIODS = 24   # delay + jitter, in control periods (bounded lockstep inboxes)
 
 
@@ -60,6 +64,13 @@ class NetworkConfig:
 
     def link(self, parent: str, child: str) -> LinkModel:
         return self.links.get((parent, child), self.default)
+
+    @property
+    def link_settings(self) -> LinkSettings | None:
+        """The link model as the centralized simulator takes it (``Scenario.network``;
+        None when every link is ideal)."""
+        settings = LinkSettings(self.seed, self.default, tuple(self.links.items()), self.watchdog)
+        return None if settings.ideal else settings
 
 
 class _Fields:
@@ -84,17 +95,10 @@ class _Fields:
             self.fail(f"{where}.{unknown[0]}"[:80], f"unknown field (expected one of: {', '.join(sorted(allowed))})")
         return data
 
-    def link_model(self, data: dict, where: str, base: LinkModel, period: float) -> LinkModel:
-        delay = self.number(data, "delay", where, base.delay, 3600)
-        jitter = self.number(data, "jitter", where, base.jitter, 3600)
-        loss = self.number(data, "loss", where, base.loss, 0.99)
-        reorder = data.get("reorder", base.reorder)
-        if not isinstance(reorder, bool):
-            self.fail(f"{where}.reorder", f"expected true or false, got {describe_value(reorder)}")
-        if delay + jitter > MAX_DELAY_PERIODS * period * (1 + 1e-9):
-            self.fail(f"{where}.delay", f"delay + jitter = {delay + jitter:g} s exceeds {MAX_DELAY_PERIODS} control "
-                                        f"periods ({MAX_DELAY_PERIODS * period:g} s)")
-        return LinkModel(delay, jitter, loss, reorder)
+    def bound_delay(self, model: LinkModel, where: str, period: float) -> None:
+        if model.delay + model.jitter > MAX_DELAY_PERIODS * period * (1 + 1e-9):
+            self.fail(f"{where}.delay", f"delay + jitter = {model.delay + model.jitter:g} s exceeds "
+                                        f"{MAX_DELAY_PERIODS} control periods ({MAX_DELAY_PERIODS * period:g} s)")
 
 
 def network_config(data, scenario: Scenario, source: str = "<scenario>") -> NetworkConfig:
@@ -109,17 +113,12 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
     keys = data.get("keys")
     if keys is not None and (not isinstance(keys, str) or not keys or len(keys) > 4096):
         f.fail("network.keys", f"expected the path of a key file, got {describe_value(keys)}")
-    seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        f.fail("network.seed", f"expected an integer in 0..2^63, got {describe_value(seed)}")
-    resume = data.get("resume_after", 3)
-    if isinstance(resume, bool) or not isinstance(resume, int) or not 1 <= resume <= 1000:
-        f.fail("network.resume_after", f"expected an integer in 1..1000, got {describe_value(resume)}")
-    watchdog = WatchdogConfig(f.number(data, "stale_after", "network", 0.1, 3600), resume,
-                              f.number(data, "decel_v", "network", 2.0, 1e6),
-                              f.number(data, "decel_omega", "network", 8.0, 1e6))
-    if watchdog.stale_after <= 0:
-        f.fail("network.stale_after", "must be positive")
+    edges = {(p, r.name) for r in scenario.robots for p in r.parents}
+    settings = read_link_settings(data, edges, f.fail)
+    f.bound_delay(settings.default, "network", period)
+    for i, (_, model) in enumerate(settings.links):
+        f.bound_delay(model, f"network.links[{i}]", period)
+    seed, watchdog, default, links = settings.seed, settings.watchdog, settings.default, dict(settings.links)
     predict = data.get("predict", False)
     if not isinstance(predict, bool):
         f.fail("network.predict", f"expected true or false, got {describe_value(predict)}")
@@ -128,25 +127,6 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
     for name, address in addresses.items():
         if not isinstance(address, str) or not address or len(address) > 300:
             f.fail(f"network.addresses.{name}", f"expected \"host:port\", got {describe_value(address)}")
-    default = f.link_model(data, "network", IDEAL, period)
-    edges = {(p, r.name) for r in scenario.robots for p in r.parents}
-    links = {}
-    items = data.get("links", [])
-    if not isinstance(items, list):
-        f.fail("network.links", "expected [[network.links]] tables")
-    for i, item in enumerate(items):
-        where = f"network.links[{i}]"
-        item = f.table(item, where, {"parent", "child", *LINK_FIELDS})
-        edge = (item.get("parent"), item.get("child"))
-        for key, value in zip(("parent", "child"), edge):
-            if not isinstance(value, str):
-                f.fail(f"{where}.{key}", f"expected a robot's name, got {describe_value(value)}")
-        if edge not in edges:
-            f.fail(where, f"no link {describe_value(edge[0])} -> {describe_value(edge[1])} in the formation "
-                          "(parent and child must name a robot and one of its followers)")
-        if edge in links:
-            f.fail(where, f"link {edge[0]} -> {edge[1]} given twice")
-        links[edge] = f.link_model(item, where, default, period)
     failover = data.get("failover", False)
     if not isinstance(failover, bool):
         f.fail("network.failover", f"expected true or false, got {describe_value(failover)}")

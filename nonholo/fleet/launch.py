@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +27,7 @@ from nonholo.fleet.setup import robot_setups
 from nonholo.fleet.spawn import start_robot_processes
 from nonholo.fleet.telemetry import paced_clock, watched_processes
 from nonholo.sim import kernel as kn
+from nonholo.sim.links import LinkSettings
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import planned_groups, score_states
 
@@ -69,7 +70,13 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     if observe is not None and transport == "inproc":
         raise NonholoInputError("--observe: robot processes send their status there; with --transport inproc "
                                 "use --view")
-    config = config or NetworkConfig(transport=transport)
+    if config is None:   # the scenario's own link model (Scenario.network), if any
+        links = scenario.network or LinkSettings()
+        config = NetworkConfig(transport=transport, seed=links.seed, watchdog=links.watchdog, default=links.default,
+                               links=dict(links.links))
+    if scenario.network != config.link_settings:
+        # The centralized run the fleet equals plans its sub-steps with the links the robots apply.
+        scenario = replace(scenario, network=config.link_settings)
     planned = planned_groups(scenario)
     setups = robot_setups(scenario, planned)
     started = time.perf_counter()

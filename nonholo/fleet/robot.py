@@ -22,10 +22,10 @@ from nonholo.comm.channel import SecureChannel
 from nonholo.comm.errors import CommError
 from nonholo.errors import SimulationError
 from nonholo.fleet import messages as msg
-from nonholo.fleet.links import IDEAL, LOST, LinkModel, link_draws, newest_usable, usable_instants
+from nonholo.sim.links import IDEAL, LOST, LinkModel, link_draws, newest_usable, usable_instants
 from nonholo.fleet.setup import BEARING, PAIR, ROOT, RobotSetup
 from nonholo.fleet.step import follower_steps, plant_steps, root_step
-from nonholo.fleet.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
+from nonholo.sim.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
 from nonholo.sim import kernel as kn
 
 WINDOW = 64          # instants a parent may run ahead of a subscriber's acknowledged progress

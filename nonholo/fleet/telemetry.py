@@ -48,7 +48,7 @@ from nonholo.comm.transports.stream import StreamLimits
 from nonholo.comm.transports.tcp import connect_tcp, serve_tcp, tcp_port
 from nonholo.fleet.keys import MAX_AGE_MS, keys_from_file, write_fleet_key_file
 from nonholo.fleet.mesh import CONNECT_TIMEOUT_S, Backoff, split_address
-from nonholo.fleet.watchdog import FOLLOWING
+from nonholo.sim.watchdog import FOLLOWING
 from nonholo.models.formation_geometry import separation_bearing, wrap
 from nonholo.sim.kernel import OFFSET_D
 

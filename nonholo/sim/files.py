@@ -73,6 +73,21 @@ are numbers in radians or expressions of pi)::
     leaders = ["leader", "f1"]
     l = [2.0, 2.0]
     start_relative = [-3, -2, 0]     # in the frame of the first leader
+
+    [network]               # the link model of a sampled-data run (needs control_period)
+    seed = 7                # draws of each link's delays and losses (spec fleet.md §3-4)
+    delay = 0.02            # s, fixed; jitter (s) uniform on top; loss probability
+    jitter = 0.01
+    loss = 0.05
+    stale_after = 0.1       # follower watchdog (§5): stop beyond this age, resume after
+    resume_after = 3        # this many fresh states; decel_v, decel_omega the ramp
+    [[network.links]]       # per-link overrides
+    parent = "leader"
+    child = "f1"
+    delay = 0.04
+
+(The fleet reads the rest of ``[network]``: transport, keys, addresses, failover; see
+``nonholo.fleet.config``.)
 """
 from __future__ import annotations
 
@@ -85,6 +100,7 @@ from nonholo.control.registry import CONTROLLERS
 from nonholo.errors import NonholoInputError, ScenarioError
 from nonholo.errors import ExpressionError, FormationError
 from nonholo.tomlfile import describe_value
+from nonholo.sim.links import read_link_settings
 from nonholo.sim.scenario import (CHANGE_MODES, DIRECTIONS, FORMATION_LAWS, METHODS, OUTPUTS, SEPARATION_BEARING,
                                   Change, Follower, Robot, Scenario)
 
@@ -308,7 +324,8 @@ class _Reader:
         return Change(self.number(data["at"], f"{where}.at"), targets, mode, duration, direction)
 
     def scenario(self, data, name: str) -> Scenario:
-        # [network] belongs to the fleet (nonholo.fleet.config reads it); the simulator ignores it.
+        # [network]: the simulator reads its link model (nonholo.sim.links.FIELDS), the fleet all
+        # of it (nonholo.fleet.config).
         data = self.table(data, "", {"simulation", "reference", "robots", "name", "formation", "network"})
         simulation = self.table(data.get("simulation", {}), "simulation", SIMULATION_FIELDS)
         options = self.table(data.get("formation", {}), "formation", FORMATION_FIELDS)
@@ -347,13 +364,16 @@ class _Reader:
         if "sin_floor" in options:
             kwargs["sin_floor"] = self.number(options["sin_floor"], "formation.sin_floor", positive=True)
         names = [r.name for r in robots]
+        network = read_link_settings(self.table(data.get("network", {}), "network"),
+                                     {(p, r.name) for r in robots for p in r.parents}, self.fail)
+        kwargs["network"] = None if network.ideal else network
         try:
             return Scenario(reference, robots, name=self.string(data.get("name", name), "name"), **kwargs)
         except FormationError as exc:
             if exc.robot is not None and exc.robot in names:
                 self.fail(f"robots[{names.index(exc.robot)}].{exc.field}", exc.problem)
             field = {"formation": "robots", "piconet": "formation.piconet", "robots": "robots",
-                     "sin_floor": "formation.sin_floor"}.get(exc.field, f"simulation.{exc.field}")
+                     "sin_floor": "formation.sin_floor", "network": "network"}.get(exc.field, f"simulation.{exc.field}")
             self.fail(field, exc.problem)
         except NonholoInputError as exc:
             self.fail("simulation", str(exc))

@@ -284,7 +284,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
 
     * ``integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds,
       order, parents, feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start,
-      k_stop, n_steps, stats, pair_stats, record, held, step_rate)``: the time loop;
+      k_stop, n_steps, stats, pair_stats, record, held, step_rate, held_given)``: the time loop;
+      with ``held_given`` a control instant keeps the commands already in ``held`` (the caller
+      sets them, running one control period per call: the link step, ``nonholo.sim.linkstep``);
     * ``evaluate(state, fields, limits, ref_row, targets, target_row, offsets, kinds, order,
       parents, branch, sin_floor, instant)``: every robot's command and outputs at one
       instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``);
@@ -561,7 +563,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     @njit(**_OPTIONS)
     def integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
                   branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
-                  record, held, step_rate):
+                  record, held, step_rate, held_given):
         sampled_data = hold_every != 0
         recording = record.shape[1] != 0
         n_robots, n_batch = state.shape[1], state.shape[2]
@@ -579,7 +581,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
             evaluate_at(state, fields, limits, ref, targets, row, offsets, kinds, order, parents, branch, sin_floor,
                         instant)
             if sampled_data:   # a control instant holds the new commands; between them they stay in force
-                refresh = k % hold_every == 0
+                # (``held_given``: the caller set them at this instant, e.g. the link step)
+                refresh = k % hold_every == 0 and not held_given
                 for r in range(n_robots):
                     for b in range(n_batch):
                         for field in range(HELD_COUNT):

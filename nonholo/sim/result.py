@@ -304,12 +304,15 @@ class SimulationResult:
     def to_dict(self, member: int = 0) -> dict:
         """JSON-ready summary of one scenario of the batch."""
         scenario = self.scenarios[member]
+        simulation = {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
+                      "method": scenario.method, "control_period": scenario.control_period,
+                      "max_substeps": int(self.substeps.max()), "elapsed_s": self.elapsed_s,
+                      "batch": len(self.scenarios)}
+        if scenario.network is not None and not scenario.network.ideal:
+            simulation["link_model"] = scenario.network.describe()   # spec fleet.md §3–5
         return {
             "scenario": scenario.name,
-            "simulation": {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
-                           "method": scenario.method, "control_period": scenario.control_period,
-                           "max_substeps": int(self.substeps.max()), "elapsed_s": self.elapsed_s,
-                           "batch": len(self.scenarios)},
+            "simulation": simulation,
             "reference": scenario.reference.describe() if scenario.reference is not None else None,
             "piconet": scenario.piconet,
             "order": [self.names[i] for i in scenario.order()],

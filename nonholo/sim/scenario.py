@@ -22,6 +22,7 @@ from nonholo.control.registry import ControllerConfig, controller, follower_gain
 from nonholo.errors import FormationError, NonholoInputError
 from nonholo.models.formation_geometry import place_follower, pose_in_frame
 from nonholo.references.base import Reference
+from nonholo.sim.links import LinkSettings
 from nonholo.sim.targets import target_segments
 
 METHODS = ("rk4", "solve_ivp")
@@ -188,7 +189,11 @@ class Scenario:
     hold at that period (a multiple of dt; spec fleet.md); otherwise it is evaluated at
     every RK4 stage (continuous-time law). ``method``: "rk4" (compiled, batch) or
     "solve_ivp" (scipy, tight tolerances, for cross-checks). ``piconet``: one root and at
-    most 7 followers. ``sin_floor``: the l–l guard on |sin(γ1 − γ2)|.
+    most 7 followers. ``sin_floor``: the l–l guard on |sin(γ1 − γ2)|. ``network``: the link
+    model of a sampled-data run (``nonholo.sim.links.LinkSettings``: per-link delay, jitter,
+    loss, seed, and the followers' watchdog; spec fleet.md §3–5), applied to the states
+    passed from parent to child as a fleet's links do; None (or ideal links): every state is
+    used at its own instant.
     """
 
     reference: Reference | None
@@ -202,6 +207,7 @@ class Scenario:
     name: str = "scenario"
     piconet: bool = False
     sin_floor: float = 1e-6
+    network: LinkSettings | None = None
 
     def __post_init__(self):
         if self.reference is not None and not isinstance(self.reference, Reference):
@@ -281,6 +287,18 @@ class Scenario:
             raise FormationError(None, "sin_floor", f"must be a number > 0, got {self.sin_floor!r}")
         if not isinstance(self.piconet, bool):
             raise FormationError(None, "piconet", f"expected true or false, got {self.piconet!r}")
+        self._check_network()
+
+    def _check_network(self) -> None:
+        if self.network is None:
+            return
+        if not isinstance(self.network, LinkSettings):
+            raise NonholoInputError(f"network must be a nonholo.sim.links.LinkSettings, got {self.network!r}"[:200])
+        edges = {(p, r.name) for r in self.robots for p in r.parents}
+        for edge, _ in self.network.links:
+            if edge not in edges:
+                raise FormationError(None, "network", f"no link {edge[0]} -> {edge[1]} in the formation (parent and "
+                                                      "child must name a robot and one of its followers)"[:200])
 
     @property
     def n_steps(self) -> int:

@@ -34,6 +34,7 @@ from nonholo.errors import InfeasibleReferenceError, NonholoInputError, Simulati
 from nonholo.models.formation_geometry import separation_bearing, wrap
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 from nonholo.sim import kernel as kn
+from nonholo.sim.linkstep import integrate_linked, linked
 from nonholo.sim.result import SimulationResult
 from nonholo.sim.scenario import SEPARATION_BEARING, Follower, Robot, Scenario
 from nonholo.sim.targets import target_table
@@ -228,6 +229,13 @@ def _check_batch(scenarios: list[Scenario]) -> None:
                                     "shares robots, links, laws, changes, reference and time grid")
 
 
+def check_network(scenarios: list[Scenario]) -> None:
+    """A link model needs sampled-data control (states are passed at control instants)."""
+    if scenarios[0].hold_every == 0 and any(s.network is not None and not s.network.ideal for s in scenarios):
+        raise NonholoInputError("the link model ([network] delay, jitter, loss) needs sampled-data control: set "
+                                "[simulation] control_period (a multiple of dt), or remove the delay, jitter and loss")
+
+
 def _reference_survey(scenario: Scenario):
     """Peak |v_d|, |ω_d| of the reference, and its rows checked finite (None without one)."""
     if scenario.reference is None:
@@ -318,6 +326,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         raise NonholoInputError("simulate() takes a nonholo.Scenario or a list of them")
     _check_batch(scenarios)
     first = scenarios[0]
+    check_network(scenarios)
     n_steps, n_robots, n_members = first.n_steps, len(first.robots), len(scenarios)
     _check_size(first, n_robots * n_members, record)
     grid = np.arange(n_steps + 1) * first.dt
@@ -426,6 +435,8 @@ def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
     estimate = 8.0 * robots * ((kn.REC_COUNT * samples if record else 0) + kn.STAT_COUNT + 64)
     substeps = scenario.substeps or 1   # the reference rows at every stage time
     estimate += 8.0 * 10 * 2 * substeps * samples
+    if scenario.hold_every and scenario.network is not None and not scenario.network.ideal:
+        estimate += 8.0 * 2 * robots * (samples // scenario.hold_every + 1)   # the links' schedules
     if estimate > MAX_BYTES:
         raise NonholoInputError(
             f"this run would need about {estimate / 2**30:.3g} GiB ({robots} robots x {samples} samples"
@@ -464,8 +475,13 @@ def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress
         args = (state, group.fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
                 group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max, group.xi_speed, dt,
                 scenario.hold_every)
-        _integrate_chunks(integrate, args, n_steps, float(plan.sum()) * n_robots * n_batch, scenario.name,
-                          n_robots * n_batch, progress, (stats, pair_stats, records, held, step_rate))
+        outputs = (stats, pair_stats, records, held, step_rate)
+        work = float(plan.sum()) * n_robots * n_batch
+        if linked(group):   # the link model: the kernel control period by control period (nonholo.sim.linkstep)
+            show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
+            integrate_linked(integrate, kernel_for(group.laws, group.followers)[1], args, scenario, group, outputs, show)
+        else:
+            _integrate_chunks(integrate, args, n_steps, work, scenario.name, n_robots * n_batch, progress, outputs)
         if iteration == iterations - 1:   # the last run stands (its plan is the one returned)
             break
         needed = measured_plan(step_rate, group.prior, dt)
@@ -479,14 +495,14 @@ def _integrate_chunks(integrate, args, n_steps, work, name, count, progress, out
     if progress is None:
         progress = work > PROGRESS_WORK and sys.stderr.isatty()
     if not progress:
-        integrate(*args, 0, n_steps, n_steps, *outputs)
+        integrate(*args, 0, n_steps, n_steps, *outputs, False)
         return
     from tqdm import tqdm
 
     chunks = np.linspace(0, n_steps, 51).astype(np.int64)
     with tqdm(total=n_steps, unit="step", desc=f"{name}: {count} robots", file=sys.stderr) as bar:
         for k_start, k_stop in zip(chunks[:-1], chunks[1:]):
-            integrate(*args, int(k_start), int(k_stop), n_steps, *outputs)
+            integrate(*args, int(k_start), int(k_stop), n_steps, *outputs, False)
             bar.update(int(k_stop - k_start))
 
 

@@ -1,0 +1,118 @@
+"""The link model in the centralized sampled-data simulator (spec fleet.md §3–6): a scenario
+with a [network] link model (delay, jitter, loss, seed, watchdog) simulated centrally equals
+the lockstep fleet of it — in process and over TCP — on every metric; the links change the
+run, a seed reproduces it, and scenarios differing in their links simulate as one batch."""
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from nonholo.cli import main
+from nonholo.errors import NonholoInputError
+from nonholo.fleet.config import load_fleet, with_overrides
+from nonholo.fleet.launch import run_fleet
+from nonholo.sim.files import parse_scenario
+from nonholo.sim.links import LinkModel, LinkSettings
+from nonholo.sim.simulator import simulate
+from test_fleet_lockstep import assert_same_result
+from test_fleet_tcp import CASES, OVERRIDES
+
+LINKS = "[network]\nseed = 11\ndelay = 0.02\njitter = 0.03\nloss = 0.15\nstale_after = 0.06\n"
+PER_LINK = {"chain-7": ("f2", "f3"), "tree-ll": ("R2", "F"), "formation-change": ("leader", "follower")}
+
+
+def linked_file(tmp_path, case, network=LINKS):
+    text = CASES[case]() + network
+    if case in PER_LINK:   # and one link of its own: more delay, more loss
+        parent, child = PER_LINK[case]
+        text += f'[[network.links]]\nparent = "{parent}"\nchild = "{child}"\ndelay = 0.05\nloss = 0.3\n'
+    path = tmp_path / f"{case}.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_centralized_run_with_links_equals_the_lockstep_fleet_in_process(case, tmp_path):
+    scenario, config = load_fleet(linked_file(tmp_path, case), OVERRIDES)
+    assert scenario.network is not None and scenario.network == config.link_settings
+    central = simulate(scenario)
+    run = run_fleet(scenario, "inproc", config=config)
+    assert_same_result(central, run.result)
+    for field in ("x", "y", "theta", "v", "omega"):
+        assert np.allclose(central.trajectory(field), run.result.trajectory(field), rtol=1e-9, atol=1e-12), field
+    assert central.to_dict()["simulation"]["link_model"]["seed"] == 11
+    if case != "single-leader":   # the links did act: states were lost, and followers stopped at the start
+        assert sum(link["lost_by_model"] for link in run.network["links"].values()) > 0
+        assert any(r["watchdog"] for r in run.network["robots"].values())
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_centralized_run_with_links_equals_the_lockstep_fleet_over_tcp(case, tmp_path):
+    path = linked_file(tmp_path, case)
+    scenario, config = load_fleet(path, OVERRIDES)
+    run = run_fleet(scenario, "tcp", config=config, source=path, overrides=OVERRIDES, wait_s=15.0)
+    assert_same_result(simulate(scenario), run.result)
+
+
+class Summary:
+    def __init__(self, summary: dict):
+        self.summary = summary
+
+    def to_dict(self) -> dict:
+        return self.summary
+
+
+def test_nonholo_run_equals_nonholo_fleet_lockstep(tmp_path, capsys):
+    path = linked_file(tmp_path, "tree-ll", LINKS + "[simulation]\nduration = 2.0\ndt = 0.01\ncontrol_period = 0.02\n")
+    assert main(["fleet", str(path), "--transport", "inproc", "--json"]) == 0
+    fleet = json.loads(capsys.readouterr().out)
+    assert main(["run", str(path), "--json"]) == 0
+    central = json.loads(capsys.readouterr().out)
+    assert central["simulation"]["link_model"] == fleet["simulation"]["link_model"]
+    for summary in (central, fleet):   # `run --json` records no trajectories: no settling times
+        for robot in summary["robots"].values():
+            robot.get("formation", {}).pop("settling", None)
+    assert_same_result(Summary(central), Summary(fleet))
+    assert main(["run", str(path)]) == 0
+    assert "link model (seed 11)" in capsys.readouterr().out
+
+
+def test_a_link_model_needs_sampled_data_control(tmp_path, capsys):
+    path = tmp_path / "continuous.toml"
+    path.write_text(CASES["formation-change"]() + LINKS)   # no control_period: continuous-time laws
+    assert main(["run", str(path), "--json"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "needs sampled-data control" in err and "control_period" in err
+    scenario, _ = load_fleet(path)
+    with pytest.raises(NonholoInputError, match="sampled-data"):
+        simulate(dataclasses.replace(scenario, control_period=None))
+
+
+def sampled_pair(**links):
+    scenario = with_overrides(parse_scenario(CASES["formation-change"]()), **OVERRIDES)
+    return dataclasses.replace(scenario, network=LinkSettings(**links) if links else None)
+
+
+def test_links_change_the_run_and_a_seed_reproduces_it():
+    plain = simulate(sampled_pair())
+    delayed = simulate(sampled_pair(default=LinkModel(delay=0.04)))
+    lossy = [simulate(sampled_pair(seed=seed, default=LinkModel(loss=0.3))) for seed in (5, 5, 6)]
+    x = lambda result: result.trajectory("x")[1]   # noqa: E731  the follower
+    assert np.abs(x(delayed) - x(plain)).max() > 1e-3
+    assert np.array_equal(x(lossy[0]), x(lossy[1]))
+    assert not np.array_equal(x(lossy[0]), x(lossy[2])) and not np.array_equal(x(lossy[0]), x(plain))
+    ideal = simulate(sampled_pair(seed=3, default=LinkModel()))
+    assert np.array_equal(x(ideal), x(plain))   # ideal links: the plain sampled-data run
+
+
+def test_scenarios_differing_in_their_links_simulate_as_one_batch():
+    # Sub-steps fixed: a batch shares one plan (planned alone, each member would plan its own).
+    members = [dataclasses.replace(s, substeps=20) for s in
+               [sampled_pair(seed=seed, default=LinkModel(delay=delay, jitter=0.02, loss=0.2))
+                for seed, delay in ((1, 0.0), (2, 0.02), (2, 0.06))] + [sampled_pair()]]
+    batch = simulate(members)
+    for b, member in enumerate(members):
+        alone = simulate(member)
+        for field in ("x", "y", "v", "omega"):
+            assert np.array_equal(batch.trajectory(field, member=b), alone.trajectory(field)), (b, field)
