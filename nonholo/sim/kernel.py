@@ -146,7 +146,7 @@ def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
     return v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t
 
 
-@njit(inline="always", **_OPTIONS)
+@njit(cache=True, error_model="numpy", fastmath=False)   # followers: IEEE arithmetic (see make_kernel)
 def bearing_command(x, y, theta, px, py, ptheta, pv, pomega, branch, l_d, phi_d, l_rate, phi_rate, k1, k2, d,
                     v_max, omega_max):
     """An l–φ follower's saturated command and link state: (v, ω, sat v, sat ω, cos θ, sin θ,
@@ -162,7 +162,7 @@ def bearing_command(x, y, theta, px, py, ptheta, pv, pomega, branch, l_d, phi_d,
     return v, omega, sat_v, sat_w, cos_t, sin_t, separation, bearing, l_dot, phi_dot
 
 
-@njit(inline="always", **_OPTIONS)
+@njit(cache=True, error_model="numpy", fastmath=False)   # followers: IEEE arithmetic (see make_kernel)
 def pair_command(x, y, theta, p1x, p1y, p1theta, p1v, p2x, p2y, p2theta, p2v, l1_d, l2_d, l1_rate, l2_rate, k1, k2,
                  d, sin_floor, v_max, omega_max):
     """An l–l follower's saturated command and link state: (v, ω, sat v, sat ω, singular,
@@ -214,7 +214,6 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
         stage_command[s, 0, r, b], stage_command[s, 1, r, b] = values[3], values[4]
 
 
-@njit(inline="always", **_OPTIONS)
 def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
     """One classical RK4 step of a root under ``law``, the four stages in registers: the new
     (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate measures."""
@@ -235,6 +234,14 @@ def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
              rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
             (x, y, theta, xi, e1, v1, w1), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
             (x4, y4, t4, xi4, e4, v4, w4))
+
+
+# Compiled as functions of their own (LLVM inlines them into the kernel's loops): numba-level
+# inlining would copy a root's four stages into every kernel. Two variants, one per kernel kind
+# (lone roots fuse multiply-adds, graphs with followers do not, see ``make_kernel``); not cached
+# on their own (the kernels that call them are, with their code inside).
+root_rk4_fused = njit(error_model="numpy", fastmath={"contract"})(root_rk4)
+root_rk4_exact = njit(error_model="numpy", fastmath=False)(root_rk4)
 
 
 @njit(inline="always", **_OPTIONS)
@@ -310,6 +317,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     # Turn rates not known in advance (followers, posture laws' start-up) are measured.
     measuring = followers or posture_a or posture_b
     two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
+    root_rk4 = root_rk4_exact if followers else root_rk4_fused
+    # Per-step functions: inlined by numba in lone-root kernels (a single run's speed is their
+    # call overhead); compiled once each in kernels with followers, whose per-step work dwarfs
+    # a call and whose inlined copies made up most of their compile time.
+    inline = "never" if followers else "always"
 
     @njit(inline="always", **_OPTIONS)
     def root_errors(posture, fields, r, b, x, y, theta, ref):
@@ -321,7 +333,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         ex, ey = gx - x, gy - y
         return math.sqrt(ex * ex + ey * ey), wrap_angle(gtheta - theta)
 
-    @njit(inline="always", **_OPTIONS)
+    @njit(inline=inline, **_OPTIONS)
     def evaluate_at(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
                     instant):
         for position in range(order.size):
@@ -453,7 +465,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                     if closest < 2.0 * d_max[b]:
                         pair_stats[BELOW_ANY, b] += 1.0
 
-    @njit(inline="always", **_OPTIONS)
+    @njit(**_OPTIONS)
     def follower_stage(kind, x, y, theta, parent_1, parent_2, branch, target, k1, k2, d, sin_floor, v_max, omega_max):
         """(ẋ, ẏ, θ̇, v, ω) of a follower at one RK4 stage; ``parent_i`` = (x, y, θ, v, ω) of
         its parents at that stage, ``target`` = (z1_d, z2_d, ż1_d, ż2_d)."""
@@ -469,7 +481,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
         return dx, dy, dtheta, v, omega
 
-    @njit(inline="always", **_OPTIONS)
+    @njit(inline=inline, **_OPTIONS)
     def substep(state, fields, limits, rows, row, h, targets, offsets, kinds, order, parents, feeds, branch,
                 sin_floor, xi_speed, sampled_data, held, stage_pose, stage_command):
         """One classical RK4 sub-step of every robot (parents first); returns the fastest

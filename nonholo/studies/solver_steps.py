@@ -254,7 +254,7 @@ def _dormand_prince(law, fields_class):
 _DORMAND_PRINCE: dict = {}
 
 
-@njit(inline="always", **_OPTIONS)
+@njit(**_OPTIONS)
 def _rates_at(law, t, y, flat, spacing, direction, gains_i, v_max, omega_max, out):
     """Closed-loop state rates (ẋ, ẏ, θ̇, ξ̇) of one robot at time t into ``out``."""
     ref = _reference_row(flat, spacing, direction, t)
