@@ -87,3 +87,20 @@ def test_scenario_validation():
         Scenario(references.expression("t", "0"), [Robot("a")])
     with pytest.raises(NonholoInputError, match="dt must be a positive"):
         Scenario(references.eight(), [Robot("a")], dt=-1.0)
+
+
+def test_reference_tables_kept_for_reuse_are_bounded():
+    """A sweep has a sub-step plan (and a reference table) per gain: the tables kept for groups
+    that share a plan stay under the bound, oldest dropped first, the newest always kept."""
+    from nonholo.sim import simulator as sm
+
+    table = (np.zeros((sm.REFERENCE_CACHE_BYTES // 8 // 3, 1)), np.zeros(1), np.zeros(1))
+    cache = {}
+    for key in (b"a", b"b", b"c", b"d"):
+        cache[key] = table
+        sm.trim_reference_cache(cache, key)
+    assert list(cache) == [b"c", b"d"]
+    huge = (np.zeros((sm.REFERENCE_CACHE_BYTES // 8 + 1, 1)), np.zeros(1), np.zeros(1))
+    cache[b"e"] = huge
+    sm.trim_reference_cache(cache, b"e")
+    assert list(cache) == [b"e"]

@@ -454,6 +454,21 @@ def _reference_rows(scenario: Scenario, times: np.ndarray) -> np.ndarray:
     return rows
 
 
+# Reference tables kept for groups that share a sub-step plan, at most this many bytes: the
+# oldest go first (a 41-point gain sweep has 41 plans of ~32 MB each).
+REFERENCE_CACHE_BYTES = 2**26
+
+
+def trim_reference_cache(cache_: dict, keep: bytes) -> None:
+    """Drop the oldest reference tables of ``cache_`` beyond ``REFERENCE_CACHE_BYTES``, never ``keep``."""
+    total = sum(sum(part.nbytes for part in entry) for entry in cache_.values())
+    for key in list(cache_):
+        if total <= REFERENCE_CACHE_BYTES:
+            break
+        if key != keep:
+            total -= sum(part.nbytes for part in cache_.pop(key))
+
+
 def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
     """Integrate a group; groups with followers re-plan from the measured rates."""
     n_steps, dt = scenario.n_steps, scenario.dt
@@ -465,6 +480,7 @@ def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress
         if key not in cache_:
             times, row_start = stage_times(dt, plan)
             cache_[key] = (_reference_rows(scenario, times), row_start, times)
+            trim_reference_cache(cache_, key)
         rows, row_start, times = cache_[key]
         targets = group.targets(times) if group.followers else np.zeros((1, 4, n_robots))
         state, branch = group.state.copy(), group.initial_branches()
