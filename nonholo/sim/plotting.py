@@ -74,11 +74,16 @@ def plot_result(result, path=None, robots=None, member: int = 0, max_robots: int
     return fig
 
 
-def _robot_marker(ax, x, y, theta, color, size=0.6):  # noqa: D103
-    """A triangle pointing along the heading, centred on the axle midpoint."""
+def _triangle(x, y, theta, size):
+    """(3, 2) corners of a triangle pointing along the heading, centred on the axle midpoint."""
     c, s = np.cos(theta), np.sin(theta)
     body = np.array([[1.2, 0.0], [-0.6, 0.6], [-0.6, -0.6]]) * size
-    points = np.column_stack([x + c * body[:, 0] - s * body[:, 1], y + s * body[:, 0] + c * body[:, 1]])
+    return np.column_stack([x + c * body[:, 0] - s * body[:, 1], y + s * body[:, 0] + c * body[:, 1]])
+
+
+def _robot_marker(ax, x, y, theta, color, size=0.6):  # noqa: D103
+    """A robot's triangle (see ``_triangle``) drawn on ``ax``."""
+    points = _triangle(x, y, theta, size)
     return ax.fill(points[:, 0], points[:, 1], color=color, alpha=0.8, lw=0)
 
 
@@ -140,6 +145,21 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
     return fig
 
 
+def _gif_writer(base):
+    """matplotlib's Pillow writer with each frame reduced to a 256-colour palette as it is
+    grabbed, by Pillow's fast octree (the default median cut at save time took a quarter of
+    an animation's time; the frames also take a quarter of the memory)."""
+    from PIL import Image
+
+    class GifWriter(base):
+        def grab_frame(self, **savefig_kwargs):
+            super().grab_frame(**savefig_kwargs)
+            frame = self._frames[-1]
+            self._frames[-1] = frame.convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE)
+
+    return GifWriter
+
+
 def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0,
             progress: bool = False, max_robots: int = 12):
     """Write an animation (GIF; MP4 when ``path`` ends in .mp4 and ffmpeg is installed):
@@ -168,28 +188,38 @@ def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, tra
     links = [(p, c) for p, c in _links(formation) if p in shown and c in shown]
     size = 0.025 * span
 
+    # The artists are made once and moved at each frame; the layout is computed once (a
+    # constrained layout recomputed at every frame was most of an animation's time).
+    trails, markers, labels = [], [], []
+    for i in shown:
+        color = colors[i % len(colors)]
+        trails.append(ax.plot([], [], color=color, lw=1)[0])
+        markers.append(_robot_marker(ax, x[i, 0], y[i, 0], theta[i, 0], color, size)[0])
+        labels.append(ax.text(x[i, 0], y[i, 0], formation.robots[i].name, fontsize=7, color=color))
+    link_lines = [ax.plot([], [], color="0.4", lw=0.7)[0] for _ in links]
+    title = ax.set_title("", fontsize=9)
+
     def draw(k):
-        for artist in list(ax.patches) + list(ax.texts) + [ln for ln in ax.lines if ln.get_gid() == "dynamic"]:
-            artist.remove()
-        for i in shown:
-            color = colors[i % len(colors)]
-            start = max(0, k - trail_steps)
-            ln, = ax.plot(x[i, start:k + 1], y[i, start:k + 1], color=color, lw=1)
-            ln.set_gid("dynamic")
-            _robot_marker(ax, x[i, k], y[i, k], theta[i, k], color, size)
-            ax.text(x[i, k] + 1.5 * size, y[i, k] + 1.5 * size, formation.robots[i].name, fontsize=7, color=color)
-        for parent, child in links:
+        start = max(0, k - trail_steps)
+        for trail_line, marker, label, i in zip(trails, markers, labels, shown):
+            trail_line.set_data(x[i, start:k + 1], y[i, start:k + 1])
+            marker.set_xy(_triangle(x[i, k], y[i, k], theta[i, k], size))
+            label.set_position((x[i, k] + 1.5 * size, y[i, k] + 1.5 * size))
+        for line, (parent, child) in zip(link_lines, links):
             d = formation.robots[child].d
-            ln, = ax.plot([x[parent, k], x[child, k] + d * np.cos(theta[child, k])],
-                          [y[parent, k], y[child, k] + d * np.sin(theta[child, k])], color="0.4", lw=0.7)
-            ln.set_gid("dynamic")
-        ax.set_title(f"{formation.name}: t = {t[k]:.1f} s", fontsize=9)
+            line.set_data([x[parent, k], x[child, k] + d * np.cos(theta[child, k])],
+                          [y[parent, k], y[child, k] + d * np.sin(theta[child, k])])
+        title.set_text(f"{formation.name}: t = {t[k]:.1f} s")
         return []
+
+    draw(indices[-1])
+    fig.canvas.draw()
+    fig.set_layout_engine("none")
 
     mp4 = str(path).lower().endswith(".mp4")
     if mp4 and not FFMpegWriter.isAvailable():
         raise ValueError("MP4 needs ffmpeg, which is not installed: write a .gif instead")
-    writer = FFMpegWriter(fps=fps) if mp4 else PillowWriter(fps=fps)
+    writer = FFMpegWriter(fps=fps) if mp4 else _gif_writer(PillowWriter)(fps=fps)
     animation = FuncAnimation(fig, lambda j: draw(indices[j]), frames=len(indices), blit=False)
     bar = None
     if progress:
