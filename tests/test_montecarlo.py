@@ -176,3 +176,56 @@ def test_docstring_examples_of_the_study_modules():
     for module in (montecarlo, tune, distributed):
         failures, attempted = doctest.testmod(module)
         assert failures == 0 and attempted > 0, module.__name__
+
+
+NETWORKED = """name = "mc-net"
+[simulation]
+duration = 3.0
+dt = 0.01
+control_period = 0.02
+[reference]
+kind = "circle"
+[[robots]]
+name = "leader"
+controller = "dynamic-feedback"
+gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }
+start = [10.0, 0.0, 1.5707963267948966]
+[[robots]]
+name = "f1"
+formation = "separation-bearing"
+leader = "leader"
+l = 2.0
+phi = "pi/3"
+[network]
+seed = 3
+delay = 0.02
+"""
+
+
+def test_link_model_varied_moves_followers_only_and_worst_files_rerun(tmp_path):
+    """--vary network.delay / network.loss: the leader's figures stay, the follower's change
+    with the draws, a re-run gives the same numbers, and a worst sample re-runs to its own."""
+    vary = ["network.delay=uniform(0, 0.2)", "network.loss=uniform(0, 0.5)"]
+    result = run_montecarlo(NETWORKED, vary, 24, seed=5, out=tmp_path)
+    again = run_montecarlo(NETWORKED, vary, 24, seed=5)
+    assert np.array_equal(result.metrics, again.metrics)
+    assert result.worst_by == "f1.error_max"
+    assert np.ptp(result.column("leader.error_max")) == 0.0 and np.ptp(result.column("f1.error_max")) > 0.1
+    # a delay beyond stale_after (0.1 s): every state is stale on arrival, the follower never moves
+    stale = result.values[:, 0] > 0.1 + 0.02
+    assert stale.any() and (result.column("f1.peak_v")[stale] == 0.0).all()
+    assert (result.column("f1.peak_v")[result.values[:, 0] < 0.05] > 0.0).all()
+    worst = json.loads((tmp_path / "summary.json").read_text())["worst"][0]
+    rerun = nh.simulate(nh.load_scenario(tmp_path / worst["file"]), record=False)
+    assert rerun.scenario.network.default.delay == worst["values"]["network.delay"]
+    assert rerun.metrics.error_max[1] == pytest.approx(worst["f1.error_max"], rel=1e-12)
+
+
+def test_link_model_variation_needs_sampled_data_and_its_range():
+    continuous = NETWORKED.replace("control_period = 0.02\n", "").replace("delay = 0.02\n", "")
+    with pytest.raises(NonholoInputError, match="network.delay: the link model needs sampled-data control"):
+        run_montecarlo(continuous, ["network.delay=uniform(0, 0.1)"], 4)
+    with pytest.raises(NonholoInputError, match="network.loss: .* draws fall outside"):
+        run_montecarlo(NETWORKED, ["network.loss=normal(0.1, 0.5)"], 50)
+    with pytest.raises(NonholoInputError, match="'bandwidth' is not a number of the link model"):
+        run_montecarlo(NETWORKED, ["network.bandwidth=uniform(0, 1)"], 4)

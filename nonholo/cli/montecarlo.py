@@ -33,7 +33,8 @@ def register(subparsers) -> None:
     parser.add_argument("scenario", help="a scenario .toml file, or the name of a bundled example")
     parser.add_argument("--samples", type=int, required=True, metavar="N", help="number of draws")
     parser.add_argument("--vary", action="append", required=True, metavar="FIELD=DIST",
-                        help="a number and its distribution, e.g. leader.start.x='normal(0, 0.5)'; repeatable")
+                        help="a number and its distribution, e.g. leader.start.x='normal(0, 0.5)', or the link "
+                             "model's network.delay|jitter|loss='uniform(0, 0.1)'; repeatable")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     parser.add_argument("--steps", type=int, help="override the scenario's number of output steps N")
     parser.add_argument("--saturation-share", type=float, default=0.05, metavar="SHARE",

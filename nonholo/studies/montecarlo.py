@@ -43,6 +43,7 @@ import numpy as np
 from nonholo.errors import NonholoInputError
 from nonholo.sim import kernel as kn
 from nonholo.sim.result import Metrics
+from nonholo.sim.links import LinkSettings
 from nonholo.sim.scenario import Follower, Robot, Scenario
 from nonholo.sim.simulator import diverged, simulate
 from nonholo.studies import distributed
@@ -57,6 +58,11 @@ METRICS = ("error_mean", "error_rms", "error_max", "error_final", "heading_rms",
 FORMATION_METRICS = ("min_distance",)
 FAILURES = ("diverged", "singular", "saturated", "collision")
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+# ``--vary network.FIELD=DIST``: the scenario's link model, every link alike (spec fleet.md §3;
+# the per-sample draws of delay and loss keep the scenario's [network] seed: common random
+# numbers, so samples differ by the varied numbers only). FIELD: its range.
+NETWORK = "network"
+NETWORK_FIELDS = {"delay": (0.0, 3600.0), "jitter": (0.0, 3600.0), "loss": (0.0, 1.0)}
 Z95 = 1.959963984540054
 MAX_SAMPLES = 10_000_000
 _NUMBER = r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
@@ -115,6 +121,15 @@ class Variation:
         if not sep:
             raise NonholoInputError(f"--vary must look like ROBOT.FIELD=normal(MU, SIGMA), got {text!r}"[:200])
         where = where.strip()
+        if where.startswith(NETWORK + "."):
+            path = where[len(NETWORK) + 1:]
+            if path not in NETWORK_FIELDS:
+                raise NonholoInputError(f"--vary {where}: {path!r} is not a number of the link model "
+                                        f"(valid: {', '.join(NETWORK_FIELDS)})"[:300])
+            if scenario.hold_every == 0:
+                raise NonholoInputError(f"--vary {where}: the link model needs sampled-data control: set "
+                                        "[simulation] control_period in the scenario")
+            return cls(NETWORK, path, Distribution.parse(dist))
         names = sorted((n for n in scenario.names if where.startswith(n + ".")), key=len, reverse=True)
         if not names:
             raise NonholoInputError(f"--vary {where}: no robot of that name (robots: {', '.join(scenario.names)})"[:300])
@@ -188,6 +203,11 @@ def sample_scenario(base: Scenario, fields: Sequence[tuple[str, str]], row: Sequ
     by_robot: dict[str, dict] = {}
     for (robot, path), value in zip(fields, row):
         by_robot.setdefault(robot, {})[path] = value
+    link = by_robot.pop(NETWORK, None)
+    if link:
+        settings = base.network or LinkSettings()
+        default = dataclasses.replace(settings.default, **{k: float(v) for k, v in link.items()})
+        base = dataclasses.replace(base, network=dataclasses.replace(settings, default=default))
     world = None
     robots = list(base.robots)
     for i, robot in enumerate(robots):
@@ -424,13 +444,27 @@ def run_montecarlo(text: str, variations_text: Sequence[str], samples: int, seed
     fields = [(v.robot, v.path) for v in variations]
     if len(set(fields)) != len(fields):
         raise NonholoInputError("--vary: a field is varied twice")
-    part = varied_part(scenario, [v.robot for v in variations])
+    if any(v.robot == NETWORK for v in variations):   # links reach every follower: the whole scenario
+        part = scenario
+    else:
+        part = varied_part(scenario, [v.robot for v in variations])
     sample_scenario(part, fields, [_mean(v.distribution) for v in variations])  # checks the fields apply
     columns = metric_columns(part)
-    worst_by = worst_by or f"{variations[0].robot}.error_max"
+    affected = [v.robot for v in variations if v.robot != NETWORK] or \
+        [r.name for r in part.robots if isinstance(r, Follower)] or [part.names[0]]   # links move followers
+    worst_by = worst_by or f"{affected[0]}.error_max"
     if worst_by not in columns:
         raise NonholoInputError(f"--worst-by {worst_by!r}: not a metric (e.g. {', '.join(columns[:4])}, …)"[:300])
     values = draw(variations, samples, seed)
+    for k, variation in enumerate(variations):
+        if variation.robot == NETWORK:
+            low, high = NETWORK_FIELDS[variation.path]
+            outside = int(np.count_nonzero(~((values[:, k] >= low) & (values[:, k] < high if variation.path == "loss"
+                                                                         else values[:, k] <= high))))
+            if outside:
+                raise NonholoInputError(f"--vary {variation.field}: {outside} of {samples} draws fall outside "
+                                        f"[{low:g}, {high:g}{')' if variation.path == 'loss' else ']'}: choose a "
+                                        "distribution within the range (e.g. uniform)")
     robots = [r.name for r in part.robots]
     work = len(robots) * part.n_steps * (part.substeps or 1)
     bounds = distributed.chunk_bounds(samples, work)
@@ -523,6 +557,9 @@ def patched_toml(text: str, variations: Sequence[Variation], row: Sequence[float
     scenario = distributed.scenario_of(text, source)
     poses = None
     for variation, value in zip(variations, row):
+        if variation.robot == NETWORK:
+            data.setdefault("network", {})[variation.path] = float(value)
+            continue
         index = scenario.names.index(variation.robot)
         robot, entry, value = scenario.robots[index], data["robots"][index], float(value)
         head, _, tail = variation.path.partition(".")
