@@ -13,29 +13,14 @@ from pathlib import Path
 import pytest
 
 import nonholo.cli
+from nonholo.fleet.bench import star_text
 from nonholo.fleet.config import load_fleet
 from nonholo.fleet.launch import run_fleet
 
 NAMES = ("leader", "f1")
-SCENARIO = """name = "signals"
-[simulation]
-duration = 60.0
-dt = 0.02
-control_period = 0.02
-[reference]
-kind = "circle"
-[[robots]]
-name = "leader"
-controller = "dynamic-feedback"
-gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }
-start = [0.0, 0.0, 1.5707963267948966]
-[[robots]]
-name = "f1"
-formation = "separation-bearing"
-leader = "leader"
-l = 2.0
-phi = "pi/3"
-"""
+# A leader on the circle and one follower (nonholo.fleet.bench.star_text), run long enough
+# to be signalled mid-run.
+SCENARIO = star_text(1).replace("duration = 2.0", "duration = 60.0\ndt = 0.02\ncontrol_period = 0.02")
 START_S = 15.0     # bound on the robots' start (Pythons importing numba on a loaded machine)
 END_S = 4.0        # bound on the launcher's end after the signal (grace 1 s, then SIGKILL)
 

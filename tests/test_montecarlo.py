@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import nonholo as nh
+from nonholo.fleet.bench import star_text
 from nonholo.cli import main
 from nonholo.errors import NonholoInputError
 from nonholo.studies.montecarlo import Distribution, Variation, patched_toml, run_montecarlo, toml_text, wilson
@@ -178,28 +179,10 @@ def test_docstring_examples_of_the_study_modules():
         assert failures == 0 and attempted > 0, module.__name__
 
 
-NETWORKED = """name = "mc-net"
-[simulation]
-duration = 3.0
-dt = 0.01
-control_period = 0.02
-[reference]
-kind = "circle"
-[[robots]]
-name = "leader"
-controller = "dynamic-feedback"
-gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }
-start = [10.0, 0.0, 1.5707963267948966]
-[[robots]]
-name = "f1"
-formation = "separation-bearing"
-leader = "leader"
-l = 2.0
-phi = "pi/3"
-[network]
-seed = 3
-delay = 0.02
-"""
+# A leader on the circle and one follower (nonholo.fleet.bench.star_text), sampled at 50 Hz
+# over a link with a delay.
+NETWORKED = star_text(1).replace("duration = 2.0", "duration = 3.0\ndt = 0.01\ncontrol_period = 0.02") + \
+    "[network]\nseed = 3\ndelay = 0.02\n"
 
 
 def test_link_model_varied_moves_followers_only_and_worst_files_rerun(tmp_path):
