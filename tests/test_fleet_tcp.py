@@ -89,7 +89,11 @@ def test_a_failing_robot_fails_the_run_and_every_process_is_reaped(tmp_path, mon
         return started[-1]
 
     monkeypatch.setattr(spawn.Robots, "start", record)
-    with pytest.raises(spawn.LaunchError, match="robot f2 failed"):
-        spawn.run_robot_processes(path, scenario, None, OVERRIDES, 10.0, 30.0,
-                                  extra={"f2": ["--connect", "ghost=127.0.0.1:1"]})
+    robots = spawn.start_robot_processes(path, scenario, None, OVERRIDES, 10.0,
+                                         extra={"f2": ["--connect", "ghost=127.0.0.1:1"]})
+    try:
+        with pytest.raises(spawn.LaunchError, match="robot f2 failed"):
+            robots.wait(30.0)
+    finally:
+        robots.discard()   # as run_fleet does: every process reaped, whatever happened
     assert len(started) == 3 and all(p.returncode is not None for p in started)

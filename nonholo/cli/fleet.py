@@ -36,18 +36,28 @@ def register(subparsers) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    from nonholo.cli.view import FleetViewing
+
+    viewing = FleetViewing(args, "nonholo fleet")
+    try:
+        return run_and_report(args, viewing)
+    finally:
+        viewing.stop()   # the page and the Foxglove bridge, whatever happened (stopping twice is harmless)
+
+
+def run_and_report(args: argparse.Namespace, viewing) -> int:
+    """Run the fleet, write and print its result, serve the page to the end if asked."""
     from nonholo import examples
     from nonholo.cli.run import format_summary, write_outputs
-    from nonholo.cli.view import FleetViewing
+    from nonholo.cli.robot import simulation_overrides
     from nonholo.errors import NonholoInputError, SimulationError
     from nonholo.fleet.launch import run_fleet
     from nonholo.fleet.report import format_network, plot_link_health
     from nonholo.fleet.config import load_fleet
 
-    viewing = FleetViewing(args, "nonholo fleet")
     try:
         source = examples.resolve(args.scenario)
-        overrides = {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
+        overrides = simulation_overrides(args)
         scenario, config = load_fleet(source, overrides)
         config = viewing.network(config, scenario.names)      # --keys, --observe
         transport = args.transport or config.transport
@@ -57,16 +67,11 @@ def handle(args: argparse.Namespace) -> int:
                             overrides=overrides, observer=viewing.observer, speed=viewing.speed,
                             observe=viewing.observe)
     except NonholoInputError as exc:
-        viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except SimulationError as exc:
-        viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except BaseException:
-        viewing.stop()
-        raise
     summary = run.to_dict()
     try:
         if args.out:
@@ -76,11 +81,9 @@ def handle(args: argparse.Namespace) -> int:
             print(f"wrote {Path(args.out) / 'network.png'}", file=sys.stderr)
         viewing.finish(run, summary)
     except NonholoInputError as exc:
-        viewing.stop()
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (OSError, ValueError) as exc:
-        viewing.stop()
         print(f"nonholo fleet: cannot write the outputs: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     if args.json:

@@ -15,6 +15,11 @@ def add_simulation_overrides(parser: argparse.ArgumentParser) -> None:
                         help="override [simulation] control_period (a multiple of dt)")
 
 
+def simulation_overrides(args: argparse.Namespace) -> dict:
+    """The values of the options ``add_simulation_overrides`` adds (None where not given)."""
+    return {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
+
+
 def add_mode_option(parser: argparse.ArgumentParser) -> None:
     """--mode lockstep|realtime (default lockstep), for `nonholo robot` and `nonholo fleet`."""
     from nonholo.fleet.config import MODES
@@ -75,8 +80,7 @@ def handle(args: argparse.Namespace) -> int:
             print(f"listening {port}", flush=True)
 
     try:
-        scenario, config = load_fleet(examples.resolve(args.scenario), {"duration": args.duration, "dt": args.dt,
-                                                                         "control_period": args.control_period})
+        scenario, config = load_fleet(examples.resolve(args.scenario), simulation_overrides(args))
         connect = []
         for item in args.connect:
             parent, sep, address = item.partition("=")

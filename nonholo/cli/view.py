@@ -90,10 +90,6 @@ def serve_until_stopped(server, seconds: float | None) -> None:
         server.stop()
 
 
-def overrides(args: argparse.Namespace) -> dict:
-    return {"duration": args.duration, "dt": args.dt, "control_period": args.control_period}
-
-
 def handle(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -140,6 +136,7 @@ def attach_inputs(args: argparse.Namespace) -> tuple:
     """(scenario, the fleet's keys by robot, (host, port)) for --attach; NonholoInputError
     naming the option otherwise."""
     from nonholo import examples
+    from nonholo.cli.robot import simulation_overrides
     from nonholo.errors import NonholoInputError
     from nonholo.fleet.config import load_fleet
     from nonholo.fleet.keys import keys_from_file
@@ -151,7 +148,7 @@ def attach_inputs(args: argparse.Namespace) -> tuple:
     except ValueError:
         raise NonholoInputError(f"--attach: HOST must be an IP address such as 127.0.0.1, got {host!r}"[:200]) \
             from None
-    scenario, config = load_fleet(examples.resolve(args.source), overrides(args))
+    scenario, config = load_fleet(examples.resolve(args.source), simulation_overrides(args))
     keys = args.keys or config.keys
     if keys is None:
         raise NonholoInputError("--keys: attaching needs the fleet's key file (the one its robots use; or set "
@@ -239,16 +236,14 @@ class FleetViewing:
 
         from nonholo.errors import NonholoInputError
         from nonholo.fleet.keys import write_fleet_key_file
-        from nonholo.fleet.mesh import split_address
+        from nonholo.cli.robot import check_watching
+        from nonholo.fleet.launch import check_observe
 
         args = self.args
-        if args.observe is not None:
-            if args.view:
-                raise NonholoInputError("--observe: with --view the fleet's own page observes it; give one of them")
-            split_address(args.observe, "--observe")
-            if (args.transport or config.transport) == "inproc":
-                raise NonholoInputError("--observe: robot processes send their status there; with --transport "
-                                        "inproc use --view")
+        check_watching(args)   # --observe's address, --speed
+        if args.observe is not None and args.view:
+            raise NonholoInputError("--observe: with --view the fleet's own page observes it; give one of them")
+        check_observe(args.observe, args.transport or config.transport)   # before any key file is made
         if args.keys:
             path = Path(args.keys)
             if not path.exists():
@@ -268,8 +263,6 @@ class FleetViewing:
         from nonholo.view import require
 
         args = self.args
-        if args.speed is not None and not (0 < args.speed < float("inf")):
-            raise NonholoInputError(f"--speed must be a positive number, got {args.speed}")
         if args.record:
             require("mcap")
         if not args.view and args.foxglove is None:

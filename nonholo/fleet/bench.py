@@ -74,7 +74,6 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
     1 s into the run. Per follower: the time from the signal to its watchdog's stop and to
     standstill (v and ω held at zero), in ms."""
     import os
-    import shutil
     import signal
     import time
 
@@ -83,8 +82,8 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
 
     path = folder / "faults.toml"
     path.write_text(star_text().replace("duration = 2.0", f"duration = {duration!r}"))
-    scenario, _ = load_fleet(path, {"dt": 0.01, "control_period": 0.02})
     overrides = {"dt": 0.01, "control_period": 0.02}
+    scenario, _ = load_fleet(path, overrides)
     robots = start_robot_processes(path, scenario, None, overrides, 20.0,
                                    extra={n: ["--mode", "realtime"] for n in scenario.names})
     followers = scenario.names[1:]
@@ -115,8 +114,7 @@ def fault_figures(folder: Path, duration: float = 3.0, signal_name: str = "SIGKI
                 if zero.size:
                     still_ms.append(1e3 * ((k + zero[0]) * scenario.dt + start - sent))
     finally:
-        robots.stop_all()
-        shutil.rmtree(robots.workdir, ignore_errors=True)
+        robots.discard()
     return {"signal": signal_name, "followers": len(followers), "stopped": len(stop_ms),
             "stop_ms_max": max(stop_ms) if stop_ms else None,
             "stop_ms_mean": float(np.mean(stop_ms)) if stop_ms else None,

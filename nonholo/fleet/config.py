@@ -43,7 +43,6 @@ from nonholo.tomlfile import describe_value, read_toml
 
 TRANSPORTS = ("tcp", "zenoh", "inproc")
 MODES = ("lockstep", "realtime")   # logical time, or the wall clock
-LINK_FIELDS = link_fields.LINK_FIELDS
 FIELDS = {"transport", "keys", "predict", "addresses", "failover", "order", "failover_after", *link_fields.FIELDS}
 MAX_DELAY_PERIODS = 24   # delay + jitter, in control periods (bounded lockstep inboxes)
 
@@ -157,7 +156,7 @@ def with_overrides(scenario: Scenario, duration=None, dt=None, control_period=No
     """The scenario with [simulation] duration, dt, control_period replaced where given."""
     changes = {k: v for k, v in (("duration", duration), ("dt", dt), ("control_period", control_period))
                if v is not None}
-    if "dt" in changes or "duration" in changes or "control_period" in changes:
+    if changes:
         changes["steps"] = None
     return replace(scenario, **changes) if changes else scenario
 
@@ -173,5 +172,5 @@ def load_fleet(path, overrides: dict | None = None) -> tuple[Scenario, NetworkCo
         raise ScenarioError(str(path), "", exc.problem) from None
     config = network_config(data.get("network", {}), scenario, str(path))
     if config.keys is not None and not config.keys.is_absolute():
-        config = NetworkConfig(**{**config.__dict__, "keys": Path(path).parent / config.keys})
+        config = replace(config, keys=Path(path).parent / config.keys)
     return scenario, config

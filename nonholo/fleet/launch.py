@@ -46,6 +46,13 @@ class FleetRun:
         return summary
 
 
+def check_observe(observe: str | None, transport: str) -> None:
+    """An observer endpoint is for robot processes: NonholoInputError with an in-process fleet."""
+    if observe is not None and transport == "inproc":
+        raise NonholoInputError("--observe: robot processes send their status there; with --transport inproc "
+                                "use --view")
+
+
 def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep", wait_s: float = 20.0,
               config: NetworkConfig | None = None, source: Path | None = None,
               overrides: dict | None = None, observer=None, speed: float | None = None,
@@ -67,9 +74,7 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
         raise NonholoInputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-    if observe is not None and transport == "inproc":
-        raise NonholoInputError("--observe: robot processes send their status there; with --transport inproc "
-                                "use --view")
+    check_observe(observe, transport)
     if config is None:   # the scenario's own link model (Scenario.network), if any
         links = scenario.network or LinkSettings()
         config = NetworkConfig(transport=transport, seed=links.seed, watchdog=links.watchdog, default=links.default,

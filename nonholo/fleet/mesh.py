@@ -4,9 +4,8 @@ piconet: a robot with followers is the master its followers connect to).
 ``RobotLinks`` is one ``Transport`` addressed by robot name: a robot with children serves a
 ``StreamServer`` hub that only its children's keys open (each child's name bound to its key
 id); for each parent it keeps a ``StreamClient`` and reconnects it when it drops, with
-exponential backoff and jitter (spec comm.md §3.5). ``on_link(parent, epoch)`` runs after
-each (re)connection, with the parent hub's boot epoch, so the program can resubscribe and
-drop states of a previous boot. Frames from every link meet in one bounded inbox
+exponential backoff and jitter (spec comm.md §3.5); the program sees a parent's new boot by
+the epoch of its envelopes, resubscribes and drops states of the previous boot. Frames from every link meet in one bounded inbox
 (latest-value: the oldest is dropped and counted beyond it).
 """
 from __future__ import annotations
@@ -61,12 +60,11 @@ class RobotLinks(InboxTransport):
     names of ``children`` may connect, each with its own key); ``parents`` {parent: (host, port)}."""
 
     def __init__(self, name: str, keys: dict, children: tuple[str, ...], parents: dict,
-                 listen: tuple[str, int] | socket.socket | None, on_link=None) -> None:
+                 listen: tuple[str, int] | socket.socket | None) -> None:
         self.name = name
         self.capabilities = Capabilities(reliable=True, ordered=True, broadcast=False, max_frame=DEFAULT_MAX_FRAME)
         super().__init__(INBOX_FRAMES)
         self._keys, self._children, self._parents, self._listen = keys, children, parents, listen
-        self.on_link = on_link
         self.hub = None
         self.clients: dict[str, StreamClient] = {}
         self.reconnects = {p: 0 for p in parents}
@@ -114,8 +112,6 @@ class RobotLinks(InboxTransport):
                 continue
             backoff.reset()
             self.clients[parent] = client
-            if self.on_link is not None:
-                self.on_link(parent, client.hub_epoch)
             try:
                 while True:
                     peer, frame = await client.recv()

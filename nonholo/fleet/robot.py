@@ -22,7 +22,7 @@ from nonholo.comm.channel import SecureChannel
 from nonholo.comm.errors import CommError
 from nonholo.errors import SimulationError
 from nonholo.fleet import messages as msg
-from nonholo.sim.links import IDEAL, LOST, LinkModel, link_draws, newest_usable, usable_instants
+from nonholo.sim.links import IDEAL, link_draws, link_schedule
 from nonholo.fleet.setup import BEARING, PAIR, ROOT, RobotSetup
 from nonholo.fleet.step import follower_steps, plant_steps, root_step
 from nonholo.sim.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
@@ -57,16 +57,10 @@ class LinkTally:
 
 @dataclass(frozen=True)
 class LinkPlan:
-    """The link model of one run as a robot needs it: ``model(parent, child)``, ``seed``
-    and the number of control instants."""
+    """The link model of one run as a robot needs it: ``model(parent, child)`` and ``seed``."""
 
     model: object = lambda parent, child: IDEAL
     seed: int = 0
-    instants: int = 0
-
-    def usable(self, parent: str, child: str, period: float) -> np.ndarray:
-        model: LinkModel = self.model(parent, child)
-        return usable_instants(model, self.seed, parent, child, self.instants, period)
 
 
 @dataclass(frozen=True)
@@ -107,15 +101,16 @@ class RobotProgram:
         self.watchdog = watchdog or WatchdogConfig()
         instants = len(setup.control_steps)
         period = setup.dt * setup.hold_every
-        links = links or LinkPlan(instants=instants)
-        links = LinkPlan(links.model, links.seed, instants)
-        # The link model, drawn by both ends alike: which of this robot's states each child
-        # never gets, and per parent the newest usable message at each instant.
-        self.drops = {c: links.usable(setup.name, c, period) == LOST for c in setup.children}
-        self.schedule = {p: newest_usable(links.usable(p, setup.name, period), instants) for p in setup.parents}
-        # Realtime: each state to a child leaves after its drawn delay (in order unless reorder).
-        self.delays = {c: link_draws(links.model(setup.name, c), links.seed, setup.name, c, instants)[0]
-                       for c in setup.children}
+        links = links or LinkPlan()
+        # The link model, drawn by both ends alike: per child, the delay of each of this
+        # robot's states (realtime: it leaves after it, in order unless reorder) and whether
+        # the child never gets it; per parent the newest usable message at each instant.
+        draws = {c: link_draws(links.model(setup.name, c), links.seed, setup.name, c, instants)
+                 for c in setup.children}
+        self.delays = {c: delays for c, (delays, _) in draws.items()}
+        self.drops = {c: lost for c, (_, lost) in draws.items()}
+        self.schedule = {p: link_schedule(links.model(p, setup.name), links.seed, p, setup.name, instants, period)
+                         for p in setup.parents}
         self.reorder = {c: links.model(setup.name, c).reorder for c in setup.children}
         self._due: dict[str, float] = {}
         self._delayed: set[asyncio.Task] = set()
@@ -401,7 +396,9 @@ class RobotProgram:
             for child in others:
                 self.progress[child] = -1
                 self.heard[child] = now
-                self.drops[child] = np.zeros(len(self.ticks), dtype=bool)
+                self.drops[child] = np.zeros(len(self.ticks), dtype=bool)   # ideal links
+                self.delays[child] = np.zeros(len(self.ticks))
+                self.reorder[child] = False
             self._event({"t": now - self.start_clock, "event": "took-over", "robot": lost, "at": now})
         else:
             self.setup = replace(s, parents=(successor,))
@@ -541,7 +538,7 @@ class RobotProgram:
                 continue
             frame = self.channel.pack(msg.act("inform", self.setup.name, child,
                                               msg.conversation(child, self.setup.name), content))
-            delay = self.delays[child][instant] if self.realtime and child in self.delays else 0.0
+            delay = self.delays[child][instant] if self.realtime else 0.0
             if delay > 0:
                 self._send_later(child, frame, delay)
             else:

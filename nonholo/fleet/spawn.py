@@ -219,18 +219,3 @@ def start_robot_processes(source: Path, scenario, keys: Path | None, overrides: 
         robots.discard()
         raise
     return robots
-
-
-def run_robot_processes(source: Path, scenario, keys: Path | None, overrides: dict, wait_s: float,
-                        run_s: float, extra: dict | None = None, transport: str = "tcp",
-                        failover: tuple = ()) -> Path:
-    """Run every robot as its own process until all end (bounded by ``run_s``); the work
-    directory holding the traces (the caller removes it). Every process is reaped."""
-    robots = start_robot_processes(source, scenario, keys, overrides, wait_s, extra, transport, failover)
-    done = False
-    try:
-        robots.wait(run_s)
-        done = True
-    finally:
-        robots.stop_all() if done else robots.discard()
-    return robots.workdir

@@ -238,7 +238,6 @@ class TelemetrySender:
         self.program, self.address, self.period_s = program, address, period_s
         self.auth = LinkAuth({key_id: secret}, key_id=key_id)
         self.channel = SecureChannel(Sealer(secret, key_id=key_id, sender_id=sender_id))
-        self.sent = self.connections = 0
         self._stop = asyncio.Event()
         self._task: asyncio.Task | None = None
 
@@ -255,7 +254,6 @@ class TelemetrySender:
             client = await self._connect()
             if client is not None:
                 backoff.reset()
-                self.connections += 1
                 try:
                     if await self._stream(client):
                         return
@@ -282,7 +280,6 @@ class TelemetrySender:
         try:
             while not drain.done():
                 await client.send(self.frame())     # waits only while the socket is full
-                self.sent += 1
                 if self._stop.is_set():
                     return True
                 stopped = asyncio.ensure_future(self._stop.wait())
