@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from nonholo.cli import main
+from nonholo.fleet.bench import star_text
 from nonholo.errors import NonholoInputError
 from nonholo.fleet.config import load_fleet, with_overrides
 from nonholo.fleet.launch import run_fleet
@@ -116,3 +117,17 @@ def test_scenarios_differing_in_their_links_simulate_as_one_batch():
         alone = simulate(member)
         for field in ("x", "y", "v", "omega"):
             assert np.array_equal(batch.trajectory(field, member=b), alone.trajectory(field)), (b, field)
+
+
+def test_a_network_table_without_delay_or_loss_keeps_its_seed_and_watchdog(tmp_path):
+    """Ideal links simulate as none, but the table's seed and watchdog stay the scenario's
+    (a Monte-Carlo over network.delay draws with them)."""
+    from nonholo.sim.files import load_scenario
+
+    path = tmp_path / "ideal.toml"
+    path.write_text(star_text(1).replace("duration = 2.0", "duration = 1.0\ndt = 0.01\ncontrol_period = 0.02")
+                    + "[network]\nseed = 7\nstale_after = 0.25\n")
+    network = load_scenario(path).network
+    assert network.ideal and network.seed == 7 and network.watchdog.stale_after == 0.25
+    path.write_text(path.read_text().split("[network]")[0])
+    assert load_scenario(path).network is None

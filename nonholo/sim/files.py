@@ -366,7 +366,9 @@ class _Reader:
         names = [r.name for r in robots]
         network = read_link_settings(self.table(data.get("network", {}), "network"),
                                      {(p, r.name) for r in robots for p in r.parents}, self.fail)
-        kwargs["network"] = None if network.ideal else network
+        # kept when given even without delay or loss: its seed and watchdog are the run's
+        # (a Monte-Carlo over network.delay draws with them); ideal links simulate as none
+        kwargs["network"] = network if "network" in data else None
         try:
             return Scenario(reference, robots, name=self.string(data.get("name", name), "name"), **kwargs)
         except FormationError as exc:

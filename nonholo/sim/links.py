@@ -93,9 +93,9 @@ def newest_usable(usable: np.ndarray, instants: int) -> np.ndarray:
     """Per control instant k (0..instants−1), the index j of the newest message usable at
     k (the largest j with ``0 <= usable[j] <= k``), or −1 when none is."""
     newest = np.full(instants, -1, dtype=np.int64)
-    for j, k in enumerate(usable):
-        if 0 <= k < instants:
-            newest[k] = max(newest[k], j)
+    usable = np.asarray(usable)
+    ok = (usable >= 0) & (usable < instants)
+    np.maximum.at(newest, usable[ok], np.flatnonzero(ok))
     return np.maximum.accumulate(newest) if instants else newest
 
 
@@ -105,12 +105,6 @@ def link_schedule(model: LinkModel, seed: int, parent: str, child: str, instants
     the newest usable message index (−1: none yet). Both the fleet and the centralized
     simulator call this."""
     return newest_usable(usable_instants(model, seed, parent, child, instants, period), instants)
-
-
-def age_instants(schedule: np.ndarray) -> np.ndarray:
-    """Per instant k, the age k − j of the message used (in control periods; −1: none)."""
-    k = np.arange(len(schedule))
-    return np.where(schedule >= 0, k - schedule, -1)
 
 
 
