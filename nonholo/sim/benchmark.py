@@ -14,6 +14,18 @@ Beside the no-follower batch, ``formation_robot_steps_per_s`` runs 10^3 copies o
 7-follower chain (``formation-chain``: a leader under dynamic feedback and seven l–φ followers,
 each reading its parent's stage values) as one batch, statistics only, over its first
 ``FORMATION_DURATION`` s.
+
+**Interleaved.** Machines are shared and noisy: each subject and its baselines run in turn,
+round after round (``interleaved``), and every figure is the median of its rounds, with the
+spread (fastest and slowest round) beside it; a speed-up is the ratio of the medians, and its
+spread the range of the ratios of the same round.
+
+**Where the time goes** (``step_profile``, ``nonholo bench --profile``): the batch step taken
+apart with the kernel's own compiled pieces run alone over the same batch — one law evaluation
+(``root_command``: sin/cos of θ, the law, the actuator limits), one RK4 step (``root_rk4``: four
+evaluations, the plant, the combination), the kernel's ``evaluate`` (the sample at t_k) and
+``score`` (the sample and the running statistics) — and the single run taken apart into the
+reference table, the recording and the rest.
 """
 from __future__ import annotations
 
@@ -23,17 +35,20 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 from scipy.integrate import solve_ivp
 
 from nonholo import examples, references
 from nonholo.control.feedback_linearization import dynamic_feedback_law
 from nonholo.control.registry import controller
 from nonholo.references.feedforward import REF_DDX, REF_DDY, REF_DX, REF_DY, REF_X, REF_Y
+from nonholo.sim import kernel as kn
 from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
-from nonholo.sim.simulator import simulate
+from nonholo.sim.simulator import kernel_for, simulate
 
 DT = 0.01
 BATCH_ROBOTS = 10_000
@@ -62,14 +77,23 @@ def formation_batch(copies: int = FORMATION_COPIES, duration: float = FORMATION_
     return [chain] * copies
 
 
-def median_time(function, repeats: int) -> float:
-    function()
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
+def interleaved(subjects: dict[str, Callable[[], object]], rounds: int,
+                every: dict[str, int] | None = None) -> dict[str, list[float]]:
+    """Wall times (s) of each subject over ``rounds`` rounds, the subjects run in turn within
+    a round (each called once before, untimed: JIT caches, first-touch memory); a subject
+    of ``every`` runs only in every n-th round (slow baselines)."""
+    every = every or {}
+    for function in subjects.values():
         function()
-        times.append(time.perf_counter() - started)
-    return statistics.median(times)
+    times: dict[str, list[float]] = {name: [] for name in subjects}
+    for round_ in range(rounds):
+        for name, function in subjects.items():
+            if round_ % every.get(name, 1):
+                continue
+            started = time.perf_counter()
+            function()
+            times[name].append(time.perf_counter() - started)
+    return times
 
 
 def cold_first_call_s() -> float:
@@ -147,18 +171,22 @@ def numpy_batch(scenario: Scenario) -> None:
         q = q + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
 
 
-def run_benchmark(repeats: int = 15, progress=None) -> dict:
-    """All figures of ``nonholo bench`` (see the module docstring)."""
+def run_benchmark(repeats: int = 15, progress=None, rounds: int = 5) -> dict:
+    """All figures of ``nonholo bench`` (see the module docstring): medians over interleaved
+    rounds (``repeats`` rounds for the single run and its baselines, ``rounds`` for the
+    batch and its baseline), with ``spread`` = {figure: [fastest, slowest]}."""
     say = progress or (lambda message: None)
     single = single_scenario()
-    say("single simulation")
-    single_s = median_time(lambda: simulate(single), repeats)
+    say(f"single simulation, solve_ivp and plain Python, interleaved ({repeats} rounds)")
+    python_every = max(1, repeats // 5)   # the plain-Python loop is slow: five of the rounds
+    times = interleaved({"single": lambda: simulate(single), "solve_ivp": lambda: scipy_solve_ivp(single),
+                         "python": lambda: python_rk4(single)}, repeats, {"python": python_every})
     say("cold first call in a fresh process")
     cold_s = cold_first_call_s()
-    say("batch of 10^4 robots")
-    batch = batch_scenario()
-    batch_s = median_time(lambda: simulate(batch, record=False), 3)
-    batch_work = BATCH_ROBOTS * batch.n_steps
+    say(f"batch of 10^4 robots and the numpy batch, interleaved ({rounds} rounds)")
+    batch, small = batch_scenario(), batch_scenario(duration=2.0)
+    batch_times = interleaved({"batch": lambda: simulate(batch, record=False), "numpy": lambda: numpy_batch(small)},
+                              rounds)
     say("batch of 10^3 seven-follower chains")
     simulate(formation_batch(2), record=False)   # compiled before the clock starts
     chains = formation_batch()
@@ -166,24 +194,133 @@ def run_benchmark(repeats: int = 15, progress=None) -> dict:
     simulate(chains, record=False)
     formation_s = time.perf_counter() - started
     formation_work = FORMATION_COPIES * len(chains[0].robots) * chains[0].n_steps
-    say("baseline: plain-Python RK4 loop")
-    python_s = median_time(lambda: python_rk4(single), 1)
-    say("baseline: scipy solve_ivp")
-    ivp_s = median_time(lambda: scipy_solve_ivp(single), 3)
-    say("baseline: numpy batch")
-    small = batch_scenario(duration=2.0)
-    numpy_s = median_time(lambda: numpy_batch(small), 1)
+    batch_work, numpy_work = BATCH_ROBOTS * batch.n_steps, BATCH_ROBOTS * small.n_steps
+    rates = {"batch": [batch_work / t for t in batch_times["batch"]],
+             "numpy": [numpy_work / t for t in batch_times["numpy"]]}
+    ms = {name: [1e3 * t for t in values] for name, values in times.items()}
     figures = {
-        "single_ms": 1e3 * single_s,
+        "single_ms": statistics.median(ms["single"]),
         "single_cold_s": cold_s,
-        "batch_robot_steps_per_s": batch_work / batch_s,
+        "batch_robot_steps_per_s": statistics.median(rates["batch"]),
         "formation_robot_steps_per_s": formation_work / formation_s,
-        "baseline_python_ms": 1e3 * python_s,
-        "baseline_solve_ivp_ms": 1e3 * ivp_s,
-        "baseline_numpy_batch_robot_steps_per_s": BATCH_ROBOTS * small.n_steps / numpy_s,
+        "baseline_python_ms": statistics.median(ms["python"]),
+        "baseline_solve_ivp_ms": statistics.median(ms["solve_ivp"]),
+        "baseline_numpy_batch_robot_steps_per_s": statistics.median(rates["numpy"]),
     }
     figures["speedup_vs_python"] = figures["baseline_python_ms"] / figures["single_ms"]
     figures["speedup_vs_solve_ivp"] = figures["baseline_solve_ivp_ms"] / figures["single_ms"]
     figures["batch_speedup_vs_numpy"] = (figures["batch_robot_steps_per_s"]
                                          / figures["baseline_numpy_batch_robot_steps_per_s"])
+    python_rounds = range(0, repeats, python_every)
+    figures["spread"] = {
+        "single_ms": _range(ms["single"]),
+        "batch_robot_steps_per_s": _range(rates["batch"]),
+        "baseline_python_ms": _range(ms["python"]),
+        "baseline_solve_ivp_ms": _range(ms["solve_ivp"]),
+        "baseline_numpy_batch_robot_steps_per_s": _range(rates["numpy"]),
+        "speedup_vs_python": _range([ms["python"][i] / ms["single"][j] for i, j in enumerate(python_rounds)]),
+        "speedup_vs_solve_ivp": _range([a / b for a, b in zip(ms["solve_ivp"], ms["single"])]),
+        "batch_speedup_vs_numpy": _range([a / b for a, b in zip(rates["batch"], rates["numpy"])]),
+    }
+    figures["rounds"] = {"single": repeats, "python": len(ms["python"]), "batch": rounds}
     return figures
+
+
+def _range(values: list[float]) -> list[float]:
+    return [min(values), max(values)]
+
+
+# --- where the time goes ---------------------------------------------------------------------
+
+_PROBE = dict(error_model="numpy", fastmath={"contract"})   # as the kernel of lone roots
+
+
+@njit(**_PROBE)
+def _probe_commands(law, gains, state, rows, n_steps, sink):
+    """One saturated law evaluation per robot and step (``root_command``)."""
+    for k in range(n_steps):
+        ref = kn.row_values(rows, 2 * k)
+        for b in range(state.shape[1]):
+            v, omega, xi_dot, singular, sat_v, sat_w, _, _ = kn.root_command(
+                law, gains, state[0, b], state[1, b], state[2, b], state[3, b], ref, np.inf, np.inf)
+            sink[b] += v + omega + xi_dot + singular + sat_v + sat_w
+
+
+@njit(**_PROBE)
+def _probe_rk4(law, gains, state, rows, h, n_steps):
+    """One RK4 step per robot and step (``root_rk4``: four evaluations, plant, combination)."""
+    for k in range(n_steps):
+        r0, r1, r2 = kn.row_values(rows, 2 * k), kn.row_values(rows, 2 * k + 1), kn.row_values(rows, 2 * k + 2)
+        for b in range(state.shape[1]):
+            new, _, _, _, _ = kn.root_rk4_fused(law, gains, state[0, b], state[1, b], state[2, b], state[3, b], r0,
+                                                r1, r2, h, np.inf, np.inf)
+            state[0, b], state[1, b], state[2, b], state[3, b] = new
+
+
+PROFILE_PARTS = (
+    ("law", "law: 5 evaluations (4 RK4 stages, the sample at t_k)"),
+    ("plant_rk4", "plant and RK4 combination"),
+    ("sample", "the sample at t_k beyond its law: errors, stored"),
+    ("statistics", "running statistics and event counts"),
+    ("rest", "the rest: loops, memory traffic"),
+    ("step", "whole step (the batch figure)"),
+)
+
+
+def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, rounds: int = 3,
+                 progress=None) -> dict:
+    """Where a step's time goes (see the module docstring): ns per robot-step of the batch's
+    parts (``PROFILE_PARTS``), and for the single run its reference table, recording and the
+    rest in ms. Medians over interleaved rounds."""
+    say = progress or (lambda message: None)
+    batch = batch_scenario(robots, duration)
+    config = batch.robots[0].controller
+    law, gains = config.law, config.gain_values()
+    n_steps = batch.n_steps
+    rows = batch.reference.table(np.arange(2 * n_steps + 3) * (DT / 2))
+    state = np.array([[*r.start, rows[0, 8]] for r in batch.robots]).T.copy()
+    sink = np.zeros(robots)
+    _, evaluate, score = kernel_for(((law, config.controller.gain_tuple),), False)
+    samples = rows[0:2 * n_steps + 1:2]
+    states = np.repeat(state[None, :, None, :], n_steps + 1, axis=0)   # (N + 1, 4, 1, B)
+    fields = np.zeros((kn.MAX_FIELDS, 1, robots))
+    fields[:len(gains)] = np.array(gains)[:, None, None]
+    limits = np.full((2, 1, robots), np.inf)
+    order, kinds = np.zeros(1, np.int64), np.full(1, kn.ROOT_A, np.int64)
+    parents = np.full((2, 1), -1, np.int64)
+    targets, offsets = np.zeros((1, 4, 1)), np.zeros((2, 1, robots))
+    instant = np.zeros((kn.INSTANT_COUNT, 1, robots))
+    no_record, helds = np.empty((kn.REC_COUNT, 0, 1, robots)), np.zeros((1, kn.HELD_COUNT, 1, robots))
+
+    def sample_all():
+        for k in range(n_steps + 1):
+            evaluate(states[k], fields, limits, tuple(samples[k]), targets, k, offsets, kinds, order, parents,
+                     np.zeros((1, robots)), batch.sin_floor, instant)
+
+    def score_all():
+        stats, pair_stats = kn.new_stats(1, robots)
+        score(states, fields, limits, samples, targets, offsets, kinds, order, parents, np.zeros((1, robots)),
+              batch.sin_floor, np.zeros(robots), stats, pair_stats, no_record, 0, helds)
+
+    say("the batch step's parts")
+    times = interleaved({
+        "command": lambda: _probe_commands(law, gains, state, rows, n_steps, sink),
+        "rk4": lambda: _probe_rk4(law, gains, state.copy(), rows, DT, n_steps),
+        "evaluate": sample_all, "score": score_all,
+        "step": lambda: simulate(batch, record=False)}, rounds)
+    ns = {name: 1e9 * statistics.median(values) / (robots * n_steps) for name, values in times.items()}
+    parts = {"law": 5.0 * ns["command"], "plant_rk4": ns["rk4"] - 4.0 * ns["command"],
+             "sample": ns["evaluate"] - ns["command"], "statistics": ns["score"] - ns["evaluate"],
+             "step": ns["step"]}
+    parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "statistics"))
+    say("the single run's parts")
+    single = single_scenario()
+    table_times = np.arange(2 * single.n_steps + 1) * (DT / 2)
+    single_times = interleaved({"recorded": lambda: simulate(single), "statistics": lambda: simulate(single, record=False),
+                                "reference": lambda: single.reference.table(table_times)}, 5 * rounds)
+    single_ms = {name: 1e3 * statistics.median(values) for name, values in single_times.items()}
+    return {"batch_ns_per_robot_step": parts, "robots": robots, "steps": n_steps,
+            "single_ms": {"whole": single_ms["recorded"], "reference_table": single_ms["reference"],
+                          "recording": single_ms["recorded"] - single_ms["statistics"],
+                          "rest": single_ms["statistics"] - single_ms["reference"]},
+            "single_steps": single.n_steps}

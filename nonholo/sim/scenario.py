@@ -16,6 +16,7 @@ from __future__ import annotations
 import heapq
 import math
 import numbers
+from collections import Counter
 from dataclasses import dataclass, field
 
 from nonholo.control.registry import ControllerConfig, controller, follower_gains
@@ -221,7 +222,7 @@ class Scenario:
         if not all(isinstance(r, (Robot, Follower)) for r in self.robots):
             raise NonholoInputError("robots must be nonholo.Robot or nonholo.Follower objects")
         names = [r.name for r in self.robots]
-        duplicates = sorted({n for n in names if names.count(n) > 1})
+        duplicates = sorted(n for n, k in Counter(names).items() if k > 1)
         if duplicates:
             raise NonholoInputError(f"robot names must be unique, repeated: {', '.join(duplicates)}"[:300])
         tracking = next((r for r in self.robots if isinstance(r, Robot) and not r.posture), None)
