@@ -280,7 +280,8 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
     rows = batch.reference.table(np.arange(2 * n_steps + 3) * (DT / 2))
     state = np.array([[*r.start, rows[0, 8]] for r in batch.robots]).T.copy()
     sink = np.zeros(robots)
-    _, evaluate, score = kernel_for(((law, config.controller.gain_tuple),), False)
+    kernel = kernel_for(((law, config.controller.gain_tuple),), False)
+    evaluate, score = kernel.evaluate, kernel.score
     samples = rows[0:2 * n_steps + 1:2]
     states = np.repeat(state[None, :, None, :], n_steps + 1, axis=0)   # (N + 1, 4, 1, B)
     fields = np.zeros((kn.MAX_FIELDS, 1, robots))

@@ -76,6 +76,11 @@ K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
  SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D) = range(25)
 STAT_COUNT = 25
+ROBOT_STATS = FIRST_SINGULAR + 1   # the statistics of every robot (``add_sample``); the rest: formations
+# Lone roots under continuous-time control with fewer copies than this run one at a time
+# (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
+# LLVM's run-time overlap checks (tens of comparisons) at every step.
+ALONE_BELOW = 4
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
@@ -273,6 +278,55 @@ def stable_cache_identity(dispatcher, _seen=None) -> None:
 
 
 @njit(inline="always", **_OPTIONS)
+def robot_stats(stats, r, b):
+    """A robot's running statistics, rows 0 … ``ROBOT_STATS`` − 1 (E_MEAN … FIRST_SINGULAR), as
+    a tuple (the rows after them are kept for formations only)."""
+    return (stats[0, r, b], stats[1, r, b], stats[2, r, b], stats[3, r, b], stats[4, r, b], stats[5, r, b],
+            stats[6, r, b], stats[7, r, b], stats[8, r, b], stats[9, r, b], stats[10, r, b], stats[11, r, b],
+            stats[12, r, b], stats[13, r, b], stats[14, r, b], stats[15, r, b], stats[16, r, b], stats[17, r, b],
+            stats[18, r, b])
+
+
+@njit(inline="always", **_OPTIONS)
+def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
+    """The running statistics ``old`` (``robot_stats``) with the sample of output step k
+    (time t) added: its errors, and the command in force (v, ω and its event flags)."""
+    (e_mean, e_m2, e_sq, e_max, _, h_sum, h_sq, h_max, _, v_peak, v_peak_t, w_peak, w_peak_t, v_sq, w_sq, sat_v_sum,
+     sat_w_sum, singular_sum, first_singular) = old
+    e = abs(err1)
+    delta = e - e_mean
+    mean = e_mean + delta / (k + 1.0)
+    heading = abs(err2)
+    speed, turn = abs(v), abs(omega)
+    return (mean, e_m2 + delta * (e - mean), e_sq + e * e, max(e_max, e), e, h_sum + heading, h_sq + heading * heading,
+            max(h_max, heading), heading, max(v_peak, speed), t if speed > v_peak else v_peak_t, max(w_peak, turn),
+            t if turn > w_peak else w_peak_t, v_sq + v * v, w_sq + omega * omega, sat_v_sum + sat_v,
+            sat_w_sum + sat_w, singular_sum + singular, min(first_singular, t if singular > 0.0 else np.inf))
+
+
+@njit(inline="always", **_OPTIONS)
+def store_stats(stats, r, b, values):
+    """Write a robot's running statistics (``robot_stats``, ``add_sample``) back."""
+    (stats[0, r, b], stats[1, r, b], stats[2, r, b], stats[3, r, b], stats[4, r, b], stats[5, r, b], stats[6, r, b],
+     stats[7, r, b], stats[8, r, b], stats[9, r, b], stats[10, r, b], stats[11, r, b], stats[12, r, b],
+     stats[13, r, b], stats[14, r, b], stats[15, r, b], stats[16, r, b], stats[17, r, b], stats[18, r, b]) = values
+
+
+@njit(inline="always", **_OPTIONS)
+def store_record(record, k, r, b, row):
+    """Write one sample of a robot's record (``record_row``)."""
+    (record[0, k, r, b], record[1, k, r, b], record[2, k, r, b], record[3, k, r, b], record[4, k, r, b],
+     record[5, k, r, b], record[6, k, r, b], record[7, k, r, b], record[8, k, r, b], record[9, k, r, b],
+     record[10, k, r, b], record[11, k, r, b], record[12, k, r, b], record[13, k, r, b], record[14, k, r, b]) = row
+
+
+@njit(inline="always", **_OPTIONS)
+def record_row(x, y, theta, xi, v, omega, out1, out2, err1, err2, rate1, rate2, sin_gamma, singular, sat_v, sat_w):
+    """One sample of a robot's record, rows REC_X … REC_SATURATED."""
+    return (x, y, theta, xi, v, omega, out1, out2, err1, err2, rate1, rate2, sin_gamma, singular, sat_v + 2.0 * sat_w)
+
+
+@njit(inline="always", **_OPTIONS)
 def idle_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """The placeholder second law of a one-law kernel (never selected)."""
     return 0.0, 0.0, 0.0, 0.0
@@ -281,13 +335,18 @@ def idle_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 IdleFields = namedtuple("IdleFields", ("unused",))
 
 
-def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
+class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone"))):
+    """The compiled functions of one kernel (``make_kernel``); ``alone`` is None for graphs
+    with followers."""
+
+
+def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     """Compile (once, cached on disk) the functions that simulate a robot graph whose roots
     run ``law_a`` or ``law_b`` (namedtuple classes ``gains_a``, ``gains_b`` of their fields)
     and which has followers if ``followers`` (a compile-time choice: graphs of lone roots
     compile no formation code).
 
-    Returns ``(integrate, evaluate, score)``:
+    Returns a ``Kernel`` (integrate, evaluate, score, alone):
 
     * ``integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds,
       order, parents, feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start,
@@ -301,7 +360,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
       sin_floor, d_max, stats, pair_stats, record, hold_every, helds)``: statistics and record
       of a trajectory computed elsewhere (the scipy cross-check, or the robots of a fleet run:
       states (N+1, 4, R, B), and with ``hold_every`` > 0 the commands each robot held,
-      helds (N+1, HELD_COUNT, R, B)), by the same code.
+      helds (N+1, HELD_COUNT, R, B)), by the same code;
+    * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
+      time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies); None for
+      graphs with followers.
 
     Only these closures capture the laws: numba caches closures over module-level
     functions across processes, not closures over other closures.
@@ -391,50 +453,19 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
         n_robots, n_batch = state.shape[1], state.shape[2]
         for r in range(n_robots):
             for b in range(n_batch):
-                v, omega = instant[I_V, r, b], instant[I_OMEGA, r, b]
-                singular, sat_v, sat_w = instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b]
-                e = abs(instant[I_ERR1, r, b])
-                delta = e - stats[E_MEAN, r, b]
-                mean = stats[E_MEAN, r, b] + delta / (k + 1.0)
-                stats[E_MEAN, r, b] = mean
-                stats[E_M2, r, b] += delta * (e - mean)
-                stats[E_SQ, r, b] += e * e
-                stats[E_MAX, r, b] = max(stats[E_MAX, r, b], e)
-                stats[E_FINAL, r, b] = e
-                heading = abs(instant[I_ERR2, r, b])
-                stats[H_SUM, r, b] += heading
-                stats[H_SQ, r, b] += heading * heading
-                stats[H_MAX, r, b] = max(stats[H_MAX, r, b], heading)
-                stats[H_FINAL, r, b] = heading
-                speed, turn = abs(v), abs(omega)
-                stats[V_PEAK_T, r, b] = t if speed > stats[V_PEAK, r, b] else stats[V_PEAK_T, r, b]
-                stats[V_PEAK, r, b] = max(stats[V_PEAK, r, b], speed)
-                stats[W_PEAK_T, r, b] = t if turn > stats[W_PEAK, r, b] else stats[W_PEAK_T, r, b]
-                stats[W_PEAK, r, b] = max(stats[W_PEAK, r, b], turn)
-                stats[V_SQ, r, b] += v * v
-                stats[W_SQ, r, b] += omega * omega
-                stats[SAT_V, r, b] += sat_v
-                stats[SAT_W, r, b] += sat_w
-                stats[SINGULAR, r, b] += singular
-                stats[FIRST_SINGULAR, r, b] = min(stats[FIRST_SINGULAR, r, b], t if singular > 0.0 else np.inf)
+                new = add_sample(robot_stats(stats, r, b), t, k, instant[I_V, r, b], instant[I_OMEGA, r, b],
+                                 instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b],
+                                 instant[I_ERR1, r, b], instant[I_ERR2, r, b])
+                store_stats(stats, r, b, new)
         if recording:   # a loop of its own: the statistics loop stays small enough to vectorize cheaply
             for r in range(n_robots):
                 for b in range(n_batch):
-                    record[REC_X, k, r, b] = state[0, r, b]
-                    record[REC_Y, k, r, b] = state[1, r, b]
-                    record[REC_THETA, k, r, b] = state[2, r, b]
-                    record[REC_XI, k, r, b] = state[3, r, b]
-                    record[REC_V, k, r, b] = instant[I_V, r, b]
-                    record[REC_OMEGA, k, r, b] = instant[I_OMEGA, r, b]
-                    record[REC_OUT1, k, r, b] = instant[I_OUT1, r, b]
-                    record[REC_OUT2, k, r, b] = instant[I_OUT2, r, b]
-                    record[REC_ERR1, k, r, b] = instant[I_ERR1, r, b]
-                    record[REC_ERR2, k, r, b] = instant[I_ERR2, r, b]
-                    record[REC_RATE1, k, r, b] = instant[I_RATE1, r, b]
-                    record[REC_RATE2, k, r, b] = instant[I_RATE2, r, b]
-                    record[REC_SIN_GAMMA, k, r, b] = instant[I_SIN_GAMMA, r, b]
-                    record[REC_SINGULAR, k, r, b] = instant[I_SINGULAR, r, b]
-                    record[REC_SATURATED, k, r, b] = instant[I_SAT_V, r, b] + 2.0 * instant[I_SAT_OMEGA, r, b]
+                    row = record_row(state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b],
+                                     instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_OUT1, r, b],
+                                     instant[I_OUT2, r, b], instant[I_ERR1, r, b], instant[I_ERR2, r, b],
+                                     instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b],
+                                     instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b])
+                    store_record(record, k, r, b, row)
         if followers:
             for r in range(n_robots):
                 if kinds[r] == SEPARATION_SEPARATION:
@@ -573,6 +604,41 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                 branch[r, b] = continuous_bearing(raw, branch[r, b])
 
     @njit(**_OPTIONS)
+    def run_alone(law, gains, posture, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start,
+                  k_stop, n_steps, stats, record, step_rate):
+        """``integrate`` of one lone root under continuous-time control, its state and
+        statistics in registers from k_start to k_stop: for a few copies, the loops over the
+        batch (with LLVM's run-time overlap checks at each entry) cost more than they do."""
+        recording = record.shape[1] != 0
+        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+        v_max, omega_max = limits[0, r, b], limits[1, r, b]
+        sample = robot_stats(stats, r, b)
+        for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+            row = row_start[k]
+            ref = row_values(rows, row)
+            v, omega, _, singular, sat_v, sat_w, _, _ = root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max)
+            err1, err2 = root_errors(posture, fields, r, b, x, y, theta, ref)
+            sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
+            if recording:
+                store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0, 0.0,
+                                                         singular, sat_v, sat_w))
+            if measuring:
+                step_rate[k] = max(step_rate[k], abs(omega))
+            if k == n_steps:
+                break
+            m = substeps[k]
+            for j in range(m):
+                new, s1, s2, s3, s4 = root_rk4(law, gains, x, y, theta, xi, ref if j == 0 else row_values(rows, row + 2 * j),
+                                               row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2),
+                                               dt / m, v_max, omega_max)
+                x, y, theta, xi = new
+                if measuring:
+                    step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                       stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+        state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
+        store_stats(stats, r, b, sample)
+
+    @njit(**_OPTIONS)
     def integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
                   branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
                   record, held, step_rate, held_given):
@@ -617,6 +683,24 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
                         step_rate[k] = max(step_rate[k], abs(instant[I_OMEGA, r, b]))
 
     @njit(**_OPTIONS)
+    def integrate_alone(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents,
+                        feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats,
+                        pair_stats, record, held, step_rate, held_given):
+        """``integrate`` (same arguments) for lone roots under continuous-time control, one
+        robot at a time (``run_alone``): the faster for a few copies (``ALONE_BELOW``), and a
+        function of its own, compiled only for runs that use it."""
+        for r in range(state.shape[1]):
+            for b in range(state.shape[2]):
+                if two_laws and kinds[r] == ROOT_B:
+                    run_alone(law_b, gains_b(*field_row(fields, r, b)[:n_b]), posture_b, r, b, state, fields, limits,
+                              rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps, stats, record,
+                              step_rate)
+                else:
+                    run_alone(law_a, gains_a(*field_row(fields, r, b)[:n_a]), posture_a, r, b, state, fields, limits,
+                              rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps, stats, record,
+                              step_rate)
+
+    @njit(**_OPTIONS)
     def score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max, stats,
               pair_stats, record, hold_every, helds):
         n_robots, n_batch = states.shape[2], states.shape[3]
@@ -641,9 +725,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool):
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
-    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
+    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, run_alone,
+             integrate, integrate_alone, score)
     for function in inner:
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{function.py_func.__name__}")
     for function in inner:   # and every module-level function their code calls
         stable_cache_identity(function)
-    return integrate, evaluate, score
+    return Kernel(integrate, evaluate, score, integrate_alone if not followers else None)

@@ -59,7 +59,7 @@ STIFF_RATE = 50.0
 
 
 @cache
-def kernel_for(laws: tuple, followers: bool):
+def kernel_for(laws: tuple, followers: bool) -> kn.Kernel:
     """The compiled functions of a group whose roots run ``laws``: one or two (law function,
     field namedtuple class) pairs."""
     (law_a, fields_a), (law_b, fields_b) = laws if len(laws) == 2 else (laws[0], (kn.idle_law, kn.IdleFields))
@@ -339,11 +339,12 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
     for group in _groups(scenarios, v_peak, omega_peak, v_d0):
-        integrate, evaluate, score = kernel_for(group.laws, group.followers)
+        kernel = kernel_for(group.laws, group.followers)
         if first.method == "rk4":
-            g_stats, g_pairs, g_record, plan = _run_rk4(integrate, first, group, record, progress, reference_cache)
+            g_stats, g_pairs, g_record, plan = _run_rk4(kernel, first, group, record, progress, reference_cache)
         else:
-            g_stats, g_pairs, g_record, plan = _run_solve_ivp(evaluate, score, first, group, record, grid)
+            g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.score, first, group, record,
+                                                              grid)
         for b, (member, indices) in enumerate(group.copies):
             indices = list(indices)
             stats[:, indices, member] = g_stats[:, :, b]
@@ -385,8 +386,7 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
     cache_: dict[bytes, tuple] = {}
     planned = []
     for group in _groups([scenario], v_peak, omega_peak, v_d0):
-        integrate, _, _ = kernel_for(group.laws, group.followers)
-        *_, plan = _run_rk4(integrate, scenario, group, False, False, cache_)
+        *_, plan = _run_rk4(kernel_for(group.laws, group.followers), scenario, group, False, False, cache_)
         stage_rows, row_start, times = cache_[plan.tobytes()]
         table = group.targets(times)   # one row when no target changes
         targets = table[row_start] if table.shape[0] > 1 else np.repeat(table, row_start.size, axis=0)
@@ -408,7 +408,7 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
     component_of = {c[0]: k for k, c in enumerate(scenario.components())}
     for item in planned:
         group = item.group
-        _, _, score = kernel_for(group.laws, group.followers)
+        score = kernel_for(group.laws, group.followers).score
         columns = [list(indices) for _, indices in group.copies]
         g_states = np.ascontiguousarray(np.stack([states[:, :, c] for c in columns], axis=-1))
         g_helds = np.ascontiguousarray(np.stack([helds[:, :, c] for c in columns], axis=-1))
@@ -469,9 +469,11 @@ def trim_reference_cache(cache_: dict, keep: bytes) -> None:
             total -= sum(part.nbytes for part in cache_.pop(key))
 
 
-def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
+def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
     """Integrate a group; groups with followers re-plan from the measured rates."""
     n_steps, dt = scenario.n_steps, scenario.dt
+    alone = kernel.alone is not None and scenario.hold_every == 0 and group.state.shape[2] < kn.ALONE_BELOW
+    integrate = kernel.alone if alone else kernel.integrate
     plan = group.prior
     iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
@@ -495,7 +497,7 @@ def _run_rk4(integrate, scenario: Scenario, group: Group, record: bool, progress
         work = float(plan.sum()) * n_robots * n_batch
         if linked(group):   # the link model: the kernel control period by control period (nonholo.sim.linkstep)
             show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
-            integrate_linked(integrate, kernel_for(group.laws, group.followers)[1], args, scenario, group, outputs, show)
+            integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
         else:
             _integrate_chunks(integrate, args, n_steps, work, scenario.name, n_robots * n_batch, progress, outputs)
         if iteration == iterations - 1:   # the last run stands (its plan is the one returned)

@@ -129,7 +129,7 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
             t, y = _compiled_steps(law, fields_class, table, one, duration, settings)
         else:
             t, y = _scipy_steps(law, fields_class, scenario.reference, one, duration, settings)
-        integrate, evaluate, score = kernel_for(((law, fields_class),), False)
+        score = kernel_for(((law, fields_class),), False).score
         robot_stats, pair_stats = kn.new_stats(1, 1)
         score(np.ascontiguousarray(y.reshape(-1, 4, 1, 1)), one.fields, one.limits,
               np.ascontiguousarray(scenario.reference.table(t)), *one.graph(), robot_stats, pair_stats,
@@ -160,7 +160,7 @@ class _OneRobot:
 def _scipy_steps(law, fields_class, reference, one: _OneRobot, duration, settings):
     from scipy.integrate import solve_ivp
 
-    _, evaluate, _ = kernel_for(((law, fields_class),), False)
+    evaluate = kernel_for(((law, fields_class),), False).evaluate
     targets, offsets, kinds, order, parents, branch, sin_floor, _ = one.graph()
     instant = np.zeros((kn.INSTANT_COUNT, 1, 1))
 

@@ -1,0 +1,68 @@
+"""A few copies of lone roots run one robot at a time (``Kernel.alone``, state and statistics
+in registers); many copies run in loops over the batch (``Kernel.integrate``). Both must give
+the same trajectories, statistics and event counts, for every law, with limits, singular
+passages, sub-steps and posture goals."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from nonholo import references
+from nonholo.control.registry import CONTROLLERS, POSTURE_CONTROLLERS, controller
+from nonholo.sim import kernel as kn
+from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim.simulator import simulate
+
+COPIES = kn.ALONE_BELOW + 3   # enough copies for the loops over the batch
+
+
+def runs(scenario: Scenario, spread: float = 1.0):
+    """(one copy: ``alone``, COPIES copies: the batch loops), recorded; the copies' starts
+    are offset by ``spread`` times a few tenths (0: identical copies)."""
+    members = [dataclasses.replace(scenario, robots=tuple(
+        dataclasses.replace(r, start=(r.start[0] + 0.3 * spread * i, r.start[1] - 0.2 * spread * i, r.start[2]))
+        for r in scenario.robots)) for i in range(COPIES)]
+    return simulate(members[:1]), simulate(members)
+
+
+def assert_same(one, many, rtol=1e-12):
+    assert one.stats.shape[-1] == 1 and many.stats.shape[-1] == COPIES
+    rows = list(range(kn.ROBOT_STATS))
+    a, b = one.stats[rows, :, 0], many.stats[rows, :, 0]
+    assert np.array_equal(np.isinf(a), np.isinf(b))
+    assert np.allclose(np.where(np.isinf(a), 0, a), np.where(np.isinf(b), 0, b), rtol=rtol, atol=1e-12)
+    assert np.allclose(one.record[..., 0], many.record[..., 0], rtol=rtol, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", sorted(CONTROLLERS))
+def test_alone_equals_the_batch_loops_for_every_tracking_law(name):
+    # actuator limits that bind at the start: saturation counts and peaks are compared too
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
+    one, many = runs(Scenario(references.eight(), [robot], duration=20.0, dt=0.01))
+    assert one.stats[kn.SAT_V, 0, 0] + one.stats[kn.SAT_W, 0, 0] > 0   # the limits acted
+    assert_same(one, many)
+
+
+def test_alone_equals_the_batch_loops_through_singular_passages():
+    # dynamic feedback from rest: ξ starts at 0, the guarded singular region is entered
+    robot = Robot("r", controller("dynamic-feedback", xi0=0.0), (0.5, -0.5, 0.3))
+    one, many = runs(Scenario(references.eight(), [robot], duration=10.0, dt=0.01))
+    assert one.stats[kn.SINGULAR, 0, 0] > 0 and np.isfinite(one.stats[kn.FIRST_SINGULAR, 0, 0])
+    assert_same(one, many)
+
+
+@pytest.mark.parametrize("name", sorted(POSTURE_CONTROLLERS))
+def test_alone_equals_the_batch_loops_for_posture_goals(name):
+    # posture laws measure their turn rates (sub-step planning, one plan per batch): identical
+    # copies, so that the batch plans as the single run does
+    robot = Robot("r", controller(name), (-2.0, -1.0, 0.5), goal=(0.0, 0.0, 0.0))
+    one, many = runs(Scenario(None, [robot], duration=15.0, dt=0.02), spread=0.0)
+    assert np.array_equal(one.substeps, many.substeps)
+    assert_same(one, many, rtol=1e-10)
+
+
+def test_several_lone_roots_of_two_laws_alone():
+    robots = [Robot("a", controller("kanayama"), (0.2, 0.1, 0.0)), Robot("b", controller("cascaded"), (-0.3, 0.2, 0.1)),
+              Robot("c", controller("kanayama", kx=2.0), (0.1, -0.4, 0.2))]
+    one, many = runs(Scenario(references.circle(), robots, duration=10.0, dt=0.01))
+    assert_same(one, many)
