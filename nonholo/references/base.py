@@ -16,6 +16,9 @@ FORWARD, BACKWARD = 1, -1
 DIRECTIONS = {"forward": FORWARD, "backward": BACKWARD}
 
 
+TABLE_PIECE = 4096   # times per piece of a long reference table (``Reference.table``)
+
+
 class Reference(ABC):
     """A planar reference p_d(t) = (x_d(t), y_d(t)), twice differentiable.
 
@@ -42,10 +45,19 @@ class Reference(ABC):
         """Parameters and formulas, for reports and JSON."""
 
     def table(self, t) -> np.ndarray:
-        """Rows (len(t), 10) with the columns of ``feedforward.REF_COLUMNS``."""
-        t = np.asarray(t, dtype=float)
-        flat = self.flat_outputs(t)
+        """Rows (len(t), 10) with the columns of ``feedforward.REF_COLUMNS``. Long tables are
+        computed in pieces of ``TABLE_PIECE`` times, so that the formulas' temporary arrays
+        stay small (cache-resident, reused by the allocator) whatever the length."""
+        t = np.asarray(t, dtype=float).ravel()
+        if t.size <= TABLE_PIECE:
+            return self._table_piece(t, np.empty((t.size, 10)))
         rows = np.empty((t.size, 10))
+        for start in range(0, t.size, TABLE_PIECE):
+            self._table_piece(t[start:start + TABLE_PIECE], rows[start:start + TABLE_PIECE])
+        return rows
+
+    def _table_piece(self, t: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        flat = self.flat_outputs(t)
         rows[:, 0] = t
         rows[:, 1:7] = flat.T
         theta_d, v_d, omega_d = feedforward(flat[2], flat[3], flat[4], flat[5], self.direction)

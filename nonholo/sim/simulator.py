@@ -251,6 +251,8 @@ def _reference_survey(scenario: Scenario):
 
 
 def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
+    if np.isfinite(rows.sum()):   # no inf or NaN in the sum: none in the rows (an overflow is checked below)
+        return
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
         raise InfeasibleReferenceError(
@@ -334,7 +336,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     v_d0 = float(first.reference.table(grid[:1])[0, REF_V]) if first.reference is not None else 0.0
     stats = np.empty((kn.STAT_COUNT, n_robots, n_members))
     pair_stats = np.full((kn.PAIR_COUNT, len(first.components()), n_members), np.nan)
-    records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_members))
+    records = None if record else np.empty((kn.REC_COUNT, 0, n_robots, n_members))
     substeps = np.empty(n_robots, dtype=np.int64)
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
@@ -345,11 +347,15 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         else:
             g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.score, first, group, record,
                                                               grid)
+        if record and records is None and _whole(group, n_robots, n_members):
+            records = g_record   # one group of every robot of every member, in order: its record is the record
+        elif record and records is None:
+            records = np.empty((kn.REC_COUNT, n_steps + 1, n_robots, n_members))
         for b, (member, indices) in enumerate(group.copies):
             indices = list(indices)
             stats[:, indices, member] = g_stats[:, :, b]
             pair_stats[:, component_of[indices[0]], member] = g_pairs[:, b]
-            if record:
+            if record and records is not g_record:
                 records[:, :, indices, member] = g_record[:, :, :, b]
             substeps[indices] = plan.max()
         if on_divergence == "raise":
@@ -361,6 +367,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     return SimulationResult(scenarios=tuple(scenarios), t=grid, reference_rows=rows, stats=stats,
                             pair_stats=pair_stats, record=records if record else None, substeps=substeps,
                             elapsed_s=time.perf_counter() - started)
+
+
+def _whole(group: Group, n_robots: int, n_members: int) -> bool:
+    """Whether ``group`` holds every robot of every member, in scenario and member order."""
+    robots = list(range(n_robots))
+    return len(group.copies) == n_members and all(
+        member == b and list(indices) == robots for b, (member, indices) in enumerate(group.copies))
 
 
 class PlannedGroup:
