@@ -355,7 +355,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       sets them, running one control period per call: the link step, ``nonholo.sim.linkstep``);
     * ``evaluate(state, fields, limits, ref_row, targets, target_row, offsets, kinds, order,
       parents, branch, sin_floor, instant)``: every robot's command and outputs at one
-      instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``);
+      instant, parents first (scipy's right-hand side reads v, ω, ξ̇ from ``instant``; a kernel
+      without followers leaves the link rows I_OUT1 … I_SIN_GAMMA as they are: pass zeros);
     * ``score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch,
       sin_floor, d_max, stats, pair_stats, record, hold_every, helds)``: statistics and record
       of a trajectory computed elsewhere (the scipy cross-check, or the robots of a fleet run:
@@ -436,9 +437,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     v = omega = sat_v = sat_w = err1 = err2 = 0.0
                 instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_XI_DOT, r, b] = v, omega, xi_dot
                 instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b] = singular, sat_v, sat_w
-                instant[I_OUT1, r, b], instant[I_OUT2, r, b] = out1, out2
                 instant[I_ERR1, r, b], instant[I_ERR2, r, b] = err1, err2
-                instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b] = rate1, rate2, sin_gamma
+                if followers:   # links' outputs; in a kernel of lone roots these rows keep their zeros
+                    instant[I_OUT1, r, b], instant[I_OUT2, r, b] = out1, out2
+                    instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b] = rate1, rate2, sin_gamma
 
     @njit(**_OPTIONS)
     def evaluate(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
