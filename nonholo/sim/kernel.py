@@ -77,6 +77,9 @@ K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
  SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D) = range(25)
 STAT_COUNT = 25
 ROBOT_STATS = FIRST_SINGULAR + 1   # the statistics of every robot (``add_sample``); the rest: formations
+# ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order.
+assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
+        SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR) == tuple(range(ROBOT_STATS))
 # Lone roots under continuous-time control with fewer copies than this run one at a time
 # (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
 # LLVM's run-time overlap checks (tens of comparisons) at every step.
@@ -85,7 +88,7 @@ CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
  REC_SIN_GAMMA, REC_SINGULAR, REC_SATURATED) = range(15)
-REC_COUNT = 15
+REC_COUNT = 15   # ``record_row`` and ``store_record`` hold a sample in this order
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
 HELD_COUNT = 6
 # What one evaluation at an instant gives per robot (``instant`` array rows).

@@ -347,10 +347,9 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         else:
             g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.score, first, group, record,
                                                               grid)
-        if record and records is None and _whole(group, n_robots, n_members):
-            records = g_record   # one group of every robot of every member, in order: its record is the record
-        elif record and records is None:
-            records = np.empty((kn.REC_COUNT, n_steps + 1, n_robots, n_members))
+        if record and records is None:   # one group of every robot of every member: its record is the record
+            records = g_record if _whole(group, n_robots, n_members) else \
+                np.empty((kn.REC_COUNT, n_steps + 1, n_robots, n_members))
         for b, (member, indices) in enumerate(group.copies):
             indices = list(indices)
             stats[:, indices, member] = g_stats[:, :, b]
@@ -485,11 +484,11 @@ def trim_reference_cache(cache_: dict, keep: bytes) -> None:
 def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
     """Integrate a group; groups with followers re-plan from the measured rates."""
     n_steps, dt = scenario.n_steps, scenario.dt
-    alone = kernel.alone is not None and scenario.hold_every == 0 and group.state.shape[2] < kn.ALONE_BELOW
-    integrate = kernel.alone if alone else kernel.integrate
     plan = group.prior
     iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
+    alone = kernel.alone is not None and scenario.hold_every == 0 and n_batch < kn.ALONE_BELOW
+    integrate = kernel.alone if alone else kernel.integrate
     for iteration in range(iterations):
         key = plan.tobytes()
         if key not in cache_:
