@@ -11,7 +11,7 @@ from nonholo import references
 from nonholo.control.registry import CONTROLLERS, POSTURE_CONTROLLERS, controller
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Robot, Scenario
-from nonholo.sim.simulator import simulate
+from nonholo.sim.simulator import kernel_for, simulate
 
 COPIES = kn.ALONE_BELOW + 3   # enough copies for the loops over the batch
 
@@ -66,3 +66,51 @@ def test_several_lone_roots_of_two_laws_alone():
               Robot("c", controller("kanayama", kx=2.0), (0.1, -0.4, 0.2))]
     one, many = runs(Scenario(references.circle(), robots, duration=10.0, dt=0.01))
     assert_same(one, many)
+
+
+def score_both(scenario: Scenario, record: np.ndarray):
+    """Score the recorded trajectory ``record`` (REC_COUNT, N+1, 1, 1) of the one robot of
+    ``scenario`` with ``score_alone`` and with the loops over the batch (``score``): the
+    (stats, record) of each."""
+    (robot,) = scenario.robots
+    config = robot.controller
+    kernel = kernel_for(((config.law, config.controller.gain_tuple),), False)
+    assert kernel.scorer(False) is kernel.score_alone and kernel.scorer(True) is kernel.score
+    grid = np.arange(scenario.n_steps + 1) * scenario.dt
+    states = np.ascontiguousarray(np.moveaxis(record[[kn.REC_X, kn.REC_Y, kn.REC_THETA, kn.REC_XI]], 0, 1))
+    if scenario.reference is not None:
+        rows = scenario.reference.table(grid)
+    else:
+        rows = np.zeros((grid.size, 10))
+        rows[:, 0] = grid
+    values = config.gain_values(robot.goal)   # a posture law's goal first
+    fields = np.zeros((kn.MAX_FIELDS, 1, 1))
+    fields[:len(values), 0, 0] = values
+    limits = np.array([robot.v_max, robot.omega_max]).reshape(2, 1, 1)
+    graph = (np.zeros((1, 4, 1)), np.zeros((2, 1, 1)), np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64),
+             np.full((2, 1), -1, np.int64), np.zeros((1, 1)), scenario.sin_floor, np.zeros(1))
+    out = []
+    for score in (kernel.score_alone, kernel.score):
+        stats, pair_stats = kn.new_stats(1, 1)
+        scored = np.empty((kn.REC_COUNT, grid.size, 1, 1))
+        score(states, fields, limits, rows, *graph, stats, pair_stats, scored, 0, np.zeros((0, kn.HELD_COUNT, 1, 1)))
+        out.append((stats, scored))
+    return out
+
+
+@pytest.mark.parametrize("name", ["kanayama", "dynamic-feedback", "polar"])
+def test_score_alone_equals_the_batch_score(name):
+    # trajectories computed elsewhere (here: a recorded run, its limits binding) scored one
+    # robot at a time by alone's code and by the batch loops: the same statistics and record
+    posture = name == "polar"
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6,
+                  goal=(0.0, 0.0, 0.0) if posture else None)
+    scenario = Scenario(None if posture else references.eight(), [robot], duration=10.0, dt=0.01)
+    run = simulate(scenario)
+    (alone_stats, alone_record), (batch_stats, batch_record) = score_both(scenario, run.record)
+    rows = list(range(kn.ROBOT_STATS))
+    assert np.array_equal(alone_stats[rows], batch_stats[rows])
+    assert np.array_equal(alone_record, batch_record)
+    # and scoring the run's own trajectory reproduces the run's statistics
+    assert np.allclose(alone_stats[rows, 0, 0], run.stats[rows, 0, 0], rtol=1e-12, atol=1e-12)
+    assert alone_stats[kn.SAT_V, 0, 0] + alone_stats[kn.SAT_W, 0, 0] > 0

@@ -52,3 +52,48 @@ def test_unwritable_cache_folder_falls_back_outside_the_package(tmp_path):
     blocked.write_text("not a folder")
     ours, _ = _probe(tmp_path, XDG_CACHE_HOME=str(blocked))
     assert not ours.is_relative_to(ROOT) and "nonholo-numba-" in str(ours)
+
+
+LAW_MODULE = textwrap.dedent("""
+    from numba import njit
+    from nonholo.control.declare import POSITIVE, Gain, control_law
+
+    @njit(error_model="numpy")
+    def gone_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+        return gains.k * (1.0 + 0.0 * x), 0.2, 0.0, 0.0
+
+    control_law("gone-law", title="a law whose module is deleted later", source="tests",
+                gains={"k": Gain(1.0, POSITIVE)}, stiffness=lambda g, v_d, omega_d: g["k"])(gone_law)
+""")
+
+RUN = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    sys.path.insert(0, sys.argv[2])
+    import nonholo
+    from nonholo import references
+    from nonholo.studies.solver_steps import solver_step_statistics
+    if sys.argv[3] == "gone-law":
+        import gone_laws
+    scenario = nonholo.Scenario(references.line(), [nonholo.Robot("r", nonholo.controller(sys.argv[3]), (0.1, 0.2, 0.0))],
+                                duration=1.0, dt=0.01)
+    nonholo.simulate(scenario)
+    solver_step_statistics(scenario)
+    print("ok")
+""")
+
+
+def test_a_removed_law_does_not_break_the_cache_of_the_others(tmp_path):
+    # A law registered from a user module compiles, and caches, code of its own; once that
+    # module is gone, every other law's cached functions must still load (numba keeps one
+    # cache index per function for every law: no entry in it may name the law's types).
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "gone_laws.py").write_text(LAW_MODULE)
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    for law in ("gone-law", "kanayama"):
+        if law == "kanayama":
+            (user / "gone_laws.py").unlink()
+        done = subprocess.run([sys.executable, "-c", RUN, str(ROOT), str(user), law], env=environment,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0 and done.stdout.split()[-1] == "ok", done.stderr[-2000:]

@@ -90,11 +90,12 @@ def root_step(law, gains, contract: bool):
     options = _options(contract)
     n_fields = len(gains._fields)
     kn.stable_cache_identity(law)
+    root_command = kn.root_command if contract else kn.root_command_exact
 
     @njit(**options)
     def command(fields, x, y, theta, xi, rows, row, v_max, omega_max):
         packed = fields.reshape((fields.size, 1, 1))
-        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = kn.root_command(
+        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
             law, gains(*kn.field_row(packed, 0, 0)[:n_fields]), x, y, theta, xi, kn.row_values(rows, row), v_max,
             omega_max)
         return v, omega, xi_dot, singular, sat_v, sat_w

@@ -145,7 +145,6 @@ def continuous_bearing(raw, previous):
     return previous + wrap_angle(raw - previous)
 
 
-@njit(inline="always", **_OPTIONS)
 def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
     """A root's saturated command at one state: (v, ω, ξ̇, singular, sat v, sat ω, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
@@ -222,34 +221,48 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
         stage_command[s, 0, r, b], stage_command[s, 1, r, b] = values[3], values[4]
 
 
-def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
-    """One classical RK4 step of a root under ``law``, the four stages in registers: the new
-    (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate measures."""
-    half = 0.5 * h
-    v1, w1, e1, _, _, _, c, s = root_command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
-    a1, b1, c1 = unicycle_rates(v1, w1, c, s)
-    x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
-    v2, w2, e2, _, _, _, c, s = root_command(law, gains, x2, y2, t2, xi2, r1, v_max, omega_max)
-    a2, b2, c2 = unicycle_rates(v2, w2, c, s)
-    x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * e2
-    v3, w3, e3, _, _, _, c, s = root_command(law, gains, x3, y3, t3, xi3, r1, v_max, omega_max)
-    a3, b3, c3 = unicycle_rates(v3, w3, c, s)
-    x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * e3
-    v4, w4, e4, _, _, _, c, s = root_command(law, gains, x4, y4, t4, xi4, r2, v_max, omega_max)
-    a4, b4, c4 = unicycle_rates(v4, w4, c, s)
-    sixth = h / 6.0
-    return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
-             rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
-            (x, y, theta, xi, e1, v1, w1), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
-            (x4, y4, t4, xi4, e4, v4, w4))
+# ``root_command`` and ``root_rk4`` are compiled as functions of their own, once per law
+# (LLVM inlines them into the kernels' loops): numba-level inlining would re-type and copy a
+# root's command at every call site of every kernel, most of a kernel's compile time. Two
+# variants of each, one per kernel kind (lone roots fuse multiply-adds, graphs with
+# followers and the solver-step study do not, see ``make_kernel``); not cached on their own
+# (the kernels that call them are, with their code inside).
+root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
+root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
+root_command_exact._set_uuid(f"{__name__}.root_command_exact")
+root_command._set_uuid(f"{__name__}.root_command")
 
 
-# Compiled as functions of their own (LLVM inlines them into the kernel's loops): numba-level
-# inlining would copy a root's four stages into every kernel. Two variants, one per kernel kind
-# (lone roots fuse multiply-adds, graphs with followers do not, see ``make_kernel``); not cached
-# on their own (the kernels that call them are, with their code inside).
-root_rk4_fused = njit(error_model="numpy", fastmath={"contract"})(root_rk4)
-root_rk4_exact = njit(error_model="numpy", fastmath=False)(root_rk4)
+def _make_root_rk4(command, fastmath):
+    def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
+        """One classical RK4 step of a root under ``law``, the four stages in registers: the
+        new (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate
+        measures."""
+        half = 0.5 * h
+        v1, w1, e1, _, _, _, c, s = command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
+        a1, b1, c1 = unicycle_rates(v1, w1, c, s)
+        x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
+        v2, w2, e2, _, _, _, c, s = command(law, gains, x2, y2, t2, xi2, r1, v_max, omega_max)
+        a2, b2, c2 = unicycle_rates(v2, w2, c, s)
+        x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * e2
+        v3, w3, e3, _, _, _, c, s = command(law, gains, x3, y3, t3, xi3, r1, v_max, omega_max)
+        a3, b3, c3 = unicycle_rates(v3, w3, c, s)
+        x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * e3
+        v4, w4, e4, _, _, _, c, s = command(law, gains, x4, y4, t4, xi4, r2, v_max, omega_max)
+        a4, b4, c4 = unicycle_rates(v4, w4, c, s)
+        sixth = h / 6.0
+        return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
+                 rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
+                (x, y, theta, xi, e1, v1, w1), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
+                (x4, y4, t4, xi4, e4, v4, w4))
+
+    return njit(error_model="numpy", fastmath=fastmath)(root_rk4)
+
+
+root_rk4_fused = _make_root_rk4(root_command, {"contract"})
+root_rk4_exact = _make_root_rk4(root_command_exact, False)
+root_rk4_fused._set_uuid(f"{__name__}.root_rk4_fused")
+root_rk4_exact._set_uuid(f"{__name__}.root_rk4_exact")
 
 
 @njit(inline="always", **_OPTIONS)
@@ -290,7 +303,6 @@ def robot_stats(stats, r, b):
             stats[18, r, b])
 
 
-@njit(inline="always", **_OPTIONS)
 def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
     """The running statistics ``old`` (``robot_stats``) with the sample of output step k
     (time t) added: its errors, and the command in force (v, ω and its event flags)."""
@@ -307,6 +319,14 @@ def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
             sat_w_sum + sat_w, singular_sum + singular, min(first_singular, t if singular > 0.0 else np.inf))
 
 
+
+
+# Compiled once per process as functions of their own (LLVM inlines them into the kernels),
+# not copied into every kernel by numba: one variant per kernel kind, as ``root_command``.
+add_sample_exact = njit(error_model="numpy", fastmath=False)(add_sample)
+add_sample = njit(error_model="numpy", fastmath={"contract"})(add_sample)
+add_sample_exact._set_uuid(f"{__name__}.add_sample_exact")
+add_sample._set_uuid(f"{__name__}.add_sample")
 @njit(inline="always", **_OPTIONS)
 def store_stats(stats, r, b, values):
     """Write a robot's running statistics (``robot_stats``, ``add_sample``) back."""
@@ -338,9 +358,16 @@ def idle_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 IdleFields = namedtuple("IdleFields", ("unused",))
 
 
-class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone"))):
-    """The compiled functions of one kernel (``make_kernel``); ``alone`` is None for graphs
-    with followers."""
+class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone", "score_alone"))):
+    """The compiled functions of one kernel (``make_kernel``); ``alone`` and ``score_alone``
+    are None for graphs with followers. numba compiles each on its first call: a run pays
+    only for the functions it uses."""
+
+    def scorer(self, sampled_data: bool):
+        """The function that scores trajectories computed elsewhere: ``score_alone`` for
+        lone roots under continuous-time control (``alone``'s own code, compiled for single
+        runs anyway), else ``score``."""
+        return self.score if self.score_alone is None or sampled_data else self.score_alone
 
 
 def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
@@ -367,7 +394,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       helds (N+1, HELD_COUNT, R, B)), by the same code;
     * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
       time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies); None for
-      graphs with followers.
+      graphs with followers;
+    * ``score_alone``: ``score`` (same arguments) for lone roots under continuous-time
+      control, one robot at a time through ``alone``'s code; None for graphs with followers
+      (``Kernel.scorer`` picks).
 
     Only these closures capture the laws: numba caches closures over module-level
     functions across processes, not closures over other closures.
@@ -384,6 +414,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     measuring = followers or posture_a or posture_b
     two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
     root_rk4 = root_rk4_exact if followers else root_rk4_fused
+    command = root_command_exact if followers else root_command
+    add_sample_ = add_sample_exact if followers else add_sample
     # Per-step functions: inlined by numba in lone-root kernels (a single run's speed is their
     # call overhead); compiled once each in kernels with followers, whose per-step work dwarfs
     # a call and whose inlined copies made up most of their compile time.
@@ -412,11 +444,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 out1 = out2 = rate1 = rate2 = sin_gamma = singular = xi_dot = 0.0
                 if kind == ROOT_A or kind == ROOT_B:
                     if not (two_laws and kind == ROOT_B):
-                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
+                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = command(
                             law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, v_max, omega_max)
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, ref)
                     else:
-                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = root_command(
+                        v, omega, xi_dot, singular, sat_v, sat_w, _, _ = command(
                             law_b, gains_b(*field_row(fields, r, b)[:n_b]), x, y, theta, xi, ref, v_max, omega_max)
                         err1, err2 = root_errors(posture_b, fields, r, b, x, y, theta, ref)
                 elif followers:
@@ -458,7 +490,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         n_robots, n_batch = state.shape[1], state.shape[2]
         for r in range(n_robots):
             for b in range(n_batch):
-                new = add_sample(robot_stats(stats, r, b), t, k, instant[I_V, r, b], instant[I_OMEGA, r, b],
+                new = add_sample_(robot_stats(stats, r, b), t, k, instant[I_V, r, b], instant[I_OMEGA, r, b],
                                  instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b],
                                  instant[I_ERR1, r, b], instant[I_ERR2, r, b])
                 store_stats(stats, r, b, new)
@@ -608,40 +640,59 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                                                   state[1, r, b], cos_t, sin_t, theta, fields[OFFSET_D, r, b])
                 branch[r, b] = continuous_bearing(raw, branch[r, b])
 
-    @njit(**_OPTIONS)
-    def run_alone(law, gains, posture, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start,
-                  k_stop, n_steps, stats, record, step_rate):
-        """``integrate`` of one lone root under continuous-time control, its state and
-        statistics in registers from k_start to k_stop: for a few copies, the loops over the
-        batch (with LLVM's run-time overlap checks at each entry) cost more than they do."""
-        recording = record.shape[1] != 0
-        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-        v_max, omega_max = limits[0, r, b], limits[1, r, b]
-        sample = robot_stats(stats, r, b)
-        for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
-            row = row_start[k]
-            ref = row_values(rows, row)
-            v, omega, _, singular, sat_v, sat_w, _, _ = root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max)
-            err1, err2 = root_errors(posture, fields, r, b, x, y, theta, ref)
-            sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
-            if recording:
-                store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0, 0.0,
-                                                         singular, sat_v, sat_w))
-            if measuring:
-                step_rate[k] = max(step_rate[k], abs(omega))
-            if k == n_steps:
-                break
-            m = substeps[k]
-            for j in range(m):
-                new, s1, s2, s3, s4 = root_rk4(law, gains, x, y, theta, xi, ref if j == 0 else row_values(rows, row + 2 * j),
-                                               row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2),
-                                               dt / m, v_max, omega_max)
-                x, y, theta, xi = new
+    def alone_of(law, gains, n_fields, posture):
+        """``run_alone`` for roots under ``law``: the law is a constant of the closure, not an
+        argument, so that the compiled function's signature names no law type (numba keeps
+        one cache index for every kernel's ``run_alone``: an entry whose types cannot be
+        loaded, e.g. a law registered by a test and since removed, would break them all)."""
+
+        @njit(**_OPTIONS)
+        def run_alone(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps,
+                      stats, record, step_rate, given):
+            """``integrate`` of lone root r of copy b under continuous-time control, its state
+            and statistics in registers from k_start to k_stop: for a few copies, the loops
+            over the batch (with LLVM's run-time overlap checks at each entry) cost more than
+            they do. With ``given`` states (N+1, 4, R, B), not empty, it scores them instead
+            (sub-steps 0)."""
+            recording = record.shape[1] != 0
+            scoring = given.shape[0] != 0
+            gains_i = gains(*field_row(fields, r, b)[:n_fields])
+            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+            v_max, omega_max = limits[0, r, b], limits[1, r, b]
+            sample = robot_stats(stats, r, b)
+            for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+                if scoring:
+                    x, y, theta, xi = given[k, 0, r, b], given[k, 1, r, b], given[k, 2, r, b], given[k, 3, r, b]
+                row = row_start[k]
+                ref = row_values(rows, row)
+                v, omega, _, singular, sat_v, sat_w, _, _ = command(law, gains_i, x, y, theta, xi, ref, v_max,
+                                                                    omega_max)
+                err1, err2 = root_errors(posture, fields, r, b, x, y, theta, ref)
+                sample = add_sample_(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
+                if recording:
+                    store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
+                                                             0.0, singular, sat_v, sat_w))
                 if measuring:
-                    step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
-                                       stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
-        state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
-        store_stats(stats, r, b, sample)
+                    step_rate[k] = max(step_rate[k], abs(omega))
+                if k == n_steps:
+                    break
+                m = substeps[k]
+                for j in range(m):
+                    new, s1, s2, s3, s4 = root_rk4(law, gains_i, x, y, theta, xi,
+                                                   ref if j == 0 else row_values(rows, row + 2 * j),
+                                                   row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2),
+                                                   dt / m, v_max, omega_max)
+                    x, y, theta, xi = new
+                    if measuring:
+                        step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                           stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+            state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
+            store_stats(stats, r, b, sample)
+
+        return run_alone
+
+    run_alone_a = alone_of(law_a, gains_a, n_a, posture_a)
+    run_alone_b = alone_of(law_b, gains_b, n_b, posture_b) if two_laws else run_alone_a
 
     @njit(**_OPTIONS)
     def integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
@@ -694,16 +745,33 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         """``integrate`` (same arguments) for lone roots under continuous-time control, one
         robot at a time (``run_alone``): the faster for a few copies (``ALONE_BELOW``), and a
         function of its own, compiled only for runs that use it."""
+        no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
         for r in range(state.shape[1]):
             for b in range(state.shape[2]):
                 if two_laws and kinds[r] == ROOT_B:
-                    run_alone(law_b, gains_b(*field_row(fields, r, b)[:n_b]), posture_b, r, b, state, fields, limits,
-                              rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps, stats, record,
-                              step_rate)
+                    run_alone_b(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
+                                n_steps, stats, record, step_rate, no_states)
                 else:
-                    run_alone(law_a, gains_a(*field_row(fields, r, b)[:n_a]), posture_a, r, b, state, fields, limits,
-                              rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps, stats, record,
-                              step_rate)
+                    run_alone_a(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
+                                n_steps, stats, record, step_rate, no_states)
+
+    @njit(**_OPTIONS)
+    def score_alone(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max,
+                    stats, pair_stats, record, hold_every, helds):
+        """``score`` (same arguments) for lone roots under continuous-time control
+        (``hold_every`` 0): ``run_alone`` over the given states, with no sub-steps."""
+        n_steps = states.shape[0] - 1
+        state = states[0].copy()
+        row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
+        k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
+        for r in range(state.shape[1]):
+            for b in range(state.shape[2]):
+                if two_laws and kinds[r] == ROOT_B:
+                    run_alone_b(r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
+                                n_steps, stats, record, step_rate, states)
+                else:
+                    run_alone_a(r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
+                                n_steps, stats, record, step_rate, states)
 
     @njit(**_OPTIONS)
     def score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max, stats,
@@ -730,10 +798,15 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
-    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, run_alone,
-             integrate, integrate_alone, score)
-    for function in inner:
-        function._set_uuid(f"{__name__}.make_kernel[{identity}].{function.py_func.__name__}")
+    named = {"run_alone_a": run_alone_a, **({"run_alone_b": run_alone_b} if two_laws else {})}
+    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate,
+             integrate_alone, score, score_alone)
+    named.update((function.py_func.__name__, function) for function in inner)
+    for name, function in named.items():
+        function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
+    inner = tuple(named.values())
     for function in inner:   # and every module-level function their code calls
         stable_cache_identity(function)
-    return Kernel(integrate, evaluate, score, integrate_alone if not followers else None)
+    if followers:
+        return Kernel(integrate, evaluate, score, None, None)
+    return Kernel(integrate, evaluate, score, integrate_alone, score_alone)

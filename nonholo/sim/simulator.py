@@ -345,7 +345,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         if first.method == "rk4":
             g_stats, g_pairs, g_record, plan = _run_rk4(kernel, first, group, record, progress, reference_cache)
         else:
-            g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.score, first, group, record,
+            g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
                                                               grid)
         if record and records is None:   # one group of every robot of every member: its record is the record
             records = g_record if _whole(group, n_robots, n_members) else \
@@ -420,7 +420,7 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
     component_of = {c[0]: k for k, c in enumerate(scenario.components())}
     for item in planned:
         group = item.group
-        score = kernel_for(group.laws, group.followers).score
+        score = kernel_for(group.laws, group.followers).scorer(True)
         columns = [list(indices) for _, indices in group.copies]
         g_states = np.ascontiguousarray(np.stack([states[:, :, c] for c in columns], axis=-1))
         g_helds = np.ascontiguousarray(np.stack([helds[:, :, c] for c in columns], axis=-1))

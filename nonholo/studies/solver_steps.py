@@ -38,7 +38,7 @@ from nonholo.control.registry import initial_state
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.references.feedforward import REF_V
 from nonholo.sim import kernel as kn
-from nonholo.sim.kernel import field_row, root_command, stable_cache_identity
+from nonholo.sim.kernel import field_row, root_command_exact, stable_cache_identity
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import kernel_for
@@ -129,7 +129,7 @@ def solver_step_statistics(scenario: Scenario, settings: SolverSettings = Solver
             t, y = _compiled_steps(law, fields_class, table, one, duration, settings)
         else:
             t, y = _scipy_steps(law, fields_class, scenario.reference, one, duration, settings)
-        score = kernel_for(((law, fields_class),), False).score
+        score = kernel_for(((law, fields_class),), False).scorer(False)
         robot_stats, pair_stats = kn.new_stats(1, 1)
         score(np.ascontiguousarray(y.reshape(-1, 4, 1, 1)), one.fields, one.limits,
               np.ascontiguousarray(scenario.reference.table(t)), *one.graph(), robot_stats, pair_stats,
@@ -232,7 +232,7 @@ def _hermite(flat, spacing, t, column):
     return value, slope / spacing, curvature / (spacing * spacing)
 
 
-@njit(inline="always", **_OPTIONS)
+@njit(**_OPTIONS)   # compiled once for every law (LLVM inlines it), not copied into each law's solver
 def _reference_row(flat, spacing, direction, t):
     """The reference row (``REF_COLUMNS``) at time t: interpolated flat outputs and the
     flatness feedforward of ``nonholo.references.feedforward`` (same formulas)."""
@@ -254,21 +254,33 @@ def _dormand_prince(law, fields_class):
 _DORMAND_PRINCE: dict = {}
 
 
-@njit(**_OPTIONS)
+# Not cached on its own (the solver loop that calls it is, with its code inside): its signature
+# names the law's types, and numba keeps one cache index for every law's entry.
+@njit(error_model="numpy")
 def _rates_at(law, t, y, flat, spacing, direction, gains_i, v_max, omega_max, out):
     """Closed-loop state rates (ẋ, ẏ, θ̇, ξ̇) of one robot at time t into ``out``."""
     ref = _reference_row(flat, spacing, direction, t)
-    v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command(law, gains_i, y[0], y[1], y[2], y[3], ref, v_max, omega_max)
+    v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command_exact(law, gains_i, y[0], y[1], y[2], y[3], ref, v_max,
+                                                                  omega_max)
     out[0], out[1], out[2] = unicycle_rates(v, omega, cos_t, sin_t)
     out[3] = xi_dot
 
 
 @njit(inline="always", **_OPTIONS)
-def _rms(values):
+def _rms_scaled(values, scale):
+    """RMS of values / scale (element-wise; scalar loops: numba's array expressions and
+    slice assignments cost seconds of compile time per law)."""
     total = 0.0
-    for value in values:
-        total += value * value
+    for j in range(values.size):
+        ratio = values[j] / scale[j]
+        total += ratio * ratio
     return math.sqrt(total / values.size)
+
+
+@njit(inline="always", **_OPTIONS)
+def _copy(source, target):
+    for j in range(source.size):
+        target[j] = source[j]
 
 
 def _make_dormand_prince(law, fields_class):
@@ -289,19 +301,24 @@ def _make_dormand_prince(law, fields_class):
         f = np.empty(n)
         _rates_at(law, 0.0, y, flat, spacing, direction, gains_i, v_max, omega_max, f)
         # Initial step (scipy.integrate._ivp.common.select_initial_step, error order 4).
-        scale = atol + np.abs(y) * rtol
-        d0, d1 = _rms(y / scale), _rms(f / scale)
+        scale, ahead, f1, change = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        for j in range(n):
+            scale[j] = atol + abs(y[j]) * rtol
+        d0, d1 = _rms_scaled(y, scale), _rms_scaled(f, scale)
         h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
         h0 = min(h0, t_end)
-        f1 = np.empty(n)
-        _rates_at(law, h0, y + h0 * f, flat, spacing, direction, gains_i, v_max, omega_max, f1)
-        d2 = _rms((f1 - f) / scale) / h0
+        for j in range(n):
+            ahead[j] = y[j] + h0 * f[j]
+        _rates_at(law, h0, ahead, flat, spacing, direction, gains_i, v_max, omega_max, f1)
+        for j in range(n):
+            change[j] = f1[j] - f[j]
+        d2 = _rms_scaled(change, scale) / h0
         h1 = max(1e-6, h0 * 1e-3) if (d1 <= 1e-15 and d2 <= 1e-15) else (0.01 / max(d1, d2)) ** (1.0 / 5.0)
         h_abs = min(100 * h0, h1, t_end, max_step)
         t = 0.0
         count = 0
         t_out[0] = t
-        y_out[0] = y
+        _copy(y, y_out[0])
         count = 1
         y_new = np.empty(n)
         stage = np.empty(n)
@@ -314,7 +331,7 @@ def _make_dormand_prince(law, fields_class):
                     return -1
                 t_new = min(t + h_abs, t_end)
                 h = t_new - t
-                K[0] = f
+                _copy(f, K[0])
                 for s in range(1, 6):
                     for j in range(n):
                         acc = 0.0
@@ -346,12 +363,12 @@ def _make_dormand_prince(law, fields_class):
                 h_abs = h * max(MIN_FACTOR, SAFETY * error_norm ** ERROR_EXPONENT)
                 rejected = True
             t = t_new
-            y[:] = y_new
-            f[:] = K[6]
+            _copy(y_new, y)
+            _copy(K[6], f)
             if count == t_out.size:
                 return 0
             t_out[count] = t
-            y_out[count] = y
+            _copy(y, y_out[count])
             count += 1
         return count
 
