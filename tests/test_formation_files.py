@@ -110,3 +110,25 @@ def test_run_bad_formation_file_exits_2(tmp_path, capsys):
     path.write_text(HEAD + follower(leader="ghost"))
     assert main(["run", str(path)]) == 2
     assert "robots[1].leader: unknown robot 'ghost'" in capsys.readouterr().err
+
+
+def test_animation_frames_are_the_whole_figure_at_each_instant(tmp_path):
+    # frames are blitted: the static figure drawn once, the robots drawn again at each frame
+    import numpy as np
+    from PIL import Image
+
+    from nonholo import examples
+    from nonholo.sim.plotting import animate
+
+    result = nh.simulate(nh.load_scenario(examples.resolve("formation-circle-switch")))
+    path = animate(result, tmp_path / "a.gif", frames=5, fps=10)
+    with Image.open(path) as gif:
+        assert gif.n_frames == 5 and gif.info["duration"] == 100
+        frames = []
+        for i in range(gif.n_frames):
+            gif.seek(i)
+            frames.append(np.asarray(gif.convert("RGB")).astype(int))
+    # the axes, ticks and the reference (static) are in every frame, the robots move
+    dark = [(frame.sum(axis=2) < 200).sum() for frame in frames]
+    assert min(dark) > 0.5 * max(dark) > 0
+    assert all(np.abs(a - b).sum() > 0 for a, b in zip(frames, frames[1:]))

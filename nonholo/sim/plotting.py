@@ -145,19 +145,33 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
     return fig
 
 
-def _gif_writer(base):
-    """matplotlib's Pillow writer with each frame reduced to a 256-colour palette as it is
-    grabbed, by Pillow's fast octree (the default median cut at save time took a quarter of
-    an animation's time; the frames also take a quarter of the memory)."""
+def _write_gif(fig, ax, artists, draw, indices, path, fps, bar) -> None:
+    """Render the frames by blitting on an Agg canvas and write them as one GIF with Pillow:
+    the static part of the figure (axes, reference, labels) is drawn once and restored at
+    each frame, and only ``artists`` (the moving ones) are drawn again; each frame is
+    reduced to a 256-colour palette by Pillow's fast octree as it is taken. (Saving each
+    frame as a whole figure drew every text and tick again: most of an animation's time.)"""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
 
-    class GifWriter(base):
-        def grab_frame(self, **savefig_kwargs):
-            super().grab_frame(**savefig_kwargs)
-            frame = self._frames[-1]
-            self._frames[-1] = frame.convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE)
-
-    return GifWriter
+    canvas = FigureCanvasAgg(fig)
+    artists = sorted(artists, key=lambda artist: artist.get_zorder())   # as the axes draw them
+    for artist in artists:
+        artist.set_animated(True)
+    canvas.draw()   # the static part only: animated artists are left out
+    background = canvas.copy_from_bbox(fig.bbox)
+    frames = []
+    for k in indices:
+        canvas.restore_region(background)
+        draw(k)
+        for artist in artists:
+            ax.draw_artist(artist)
+        width, height = canvas.get_width_height(physical=True)
+        frame = Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+        frames.append(frame.convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE))
+        if bar is not None:
+            bar.update(1)
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
 
 
 def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, trail: float = 20.0,
@@ -165,7 +179,7 @@ def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, tra
     """Write an animation (GIF; MP4 when ``path`` ends in .mp4 and ffmpeg is installed):
     robots as labelled triangles with trails of ``trail`` seconds, formation links, the
     reference; ``progress`` shows a bar while frames are rendered."""
-    from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+    from matplotlib.animation import FFMpegWriter, FuncAnimation
 
     formation = result.formations[member]
     t = result.t
@@ -219,15 +233,18 @@ def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, tra
     mp4 = str(path).lower().endswith(".mp4")
     if mp4 and not FFMpegWriter.isAvailable():
         raise ValueError("MP4 needs ffmpeg, which is not installed: write a .gif instead")
-    writer = FFMpegWriter(fps=fps) if mp4 else _gif_writer(PillowWriter)(fps=fps)
-    animation = FuncAnimation(fig, lambda j: draw(indices[j]), frames=len(indices), blit=False)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(indices), unit="frame", desc=f"animating {path}", file=sys.stderr, leave=False)
     try:
-        animation.save(path, writer=writer, progress_callback=(lambda i, n: bar.update(1)) if bar else None)
+        if mp4:
+            animation = FuncAnimation(fig, lambda j: draw(indices[j]), frames=len(indices), blit=False)
+            animation.save(path, writer=FFMpegWriter(fps=fps),
+                           progress_callback=(lambda i, n: bar.update(1)) if bar else None)
+        else:
+            _write_gif(fig, ax, [*markers, *trails, *link_lines, *labels, title], draw, indices, path, fps, bar)
     finally:
         if bar is not None:
             bar.close()
