@@ -15,15 +15,26 @@ def test_study_quick_writes_report(tmp_path, capsys):
 def test_study_all_runs_every_registered_study(tmp_path, capsys, monkeypatch):
     import nonholo.studies.report as report
 
-    calls = []
-    monkeypatch.setattr(report, "write_report",
-                        lambda results, out, options=None: calls.append(results) or out / "index.html")
+    added = []
+
+    class Writer:   # the report writer sees every study's result as soon as it finishes
+        def __init__(self, out, options=None):
+            self.out = out
+
+        def add(self, result):
+            added.append(result.name)
+            return 0.0
+
+        def finish(self):
+            return self.out / "index.html"
+
+    monkeypatch.setattr(report, "ReportWriter", Writer)
     from nonholo.studies import base
 
     fake = base.Study("fake", "Fake", "for the test", lambda options: FakeResult())
     monkeypatch.setattr(report, "discover", lambda: {"fake": fake})
     assert main(["study", "--quiet", "--out", str(tmp_path)]) == 0
-    assert [r.name for r in calls[0]] == ["fake"]
+    assert added == ["fake"]
 
 
 class FakeResult:

@@ -31,22 +31,25 @@ def register(subparsers) -> None:
 def handle(args: argparse.Namespace) -> int:
     from nonholo.errors import NonholoInputError
     from nonholo.studies import StudyOptions
-    from nonholo.studies.report import chosen_studies, run_each, write_report
+    from nonholo.studies.report import ReportWriter, chosen_studies, each_result
 
-    def finished(result) -> None:
-        """Print a study's summary as soon as it finishes."""
-        if not args.quiet:
-            print(result.text())
-            print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
-                  flush=True)
-
+    outcomes = []   # (name, wall time, ok) of each study: its result goes once its section is written
+    report_s = 0.0
     try:
         options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet, sampling=args.sampling)
         chosen_studies(args.names)  # unknown names fail before any work
-        results = run_each(args.names, options, finished)
+        writer = ReportWriter(options.out_dir, options)
+        for result in each_result(args.names, options):
+            if not args.quiet:   # a study's summary as soon as it finishes
+                print(result.text())
+                print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
+                      flush=True)
+            report_s += writer.add(result)
+            outcomes.append((result.name, result.elapsed_s, result.ok))
+            del result   # the report section is written: the next study runs without this one's arrays
         started = time.perf_counter()
-        page = write_report(results, options.out_dir, options)
-        report_s = time.perf_counter() - started
+        page = writer.finish()
+        report_s += time.perf_counter() - started
     except NonholoInputError as exc:
         print(f"nonholo study: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -58,8 +61,8 @@ def handle(args: argparse.Namespace) -> int:
     else:
         print(f"report: {page} (figures and data files: {report_s:.1f} s)")
         print(f"wall time: {command_wall_time():.1f} s in all; studies "
-              + ", ".join(f"{r.name} {r.elapsed_s:.1f} s" for r in results) + f", report {report_s:.1f} s")
-    return EXIT_OK if all(r.ok for r in results) else EXIT_FAILURE
+              + ", ".join(f"{name} {elapsed:.1f} s" for name, elapsed, _ in outcomes) + f", report {report_s:.1f} s")
+    return EXIT_OK if all(ok for _, _, ok in outcomes) else EXIT_FAILURE
 
 
 _STARTED = time.perf_counter()

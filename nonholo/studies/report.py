@@ -12,7 +12,7 @@ import html
 import json
 import re
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from nonholo.studies.base import StudyOptions, StudyResult, discover
@@ -114,19 +114,29 @@ def _contents(section_id: str, title: str, fragment: str) -> str:
     return f'<li><a href="#{escape(section_id)}">{escape(title)}</a>' + (f"<ol>{inner}</ol>" if inner else "") + "</li>"
 
 
-def write_report(results: Sequence[StudyResult], out_dir: Path, options: StudyOptions | None = None) -> Path:
-    """Write every study's figures and data under ``out_dir/<study>/`` and the page
-    ``out_dir/index.html`` (contents, one section per study, appendix, run times); returns
-    the page's path. Progress per study section if ``options.progress``."""
-    from nonholo.studies.citations import appendix_html, find_citations
+class ReportWriter:
+    """The report, written one study at a time: ``add`` writes a study's figures and data
+    files under ``out_dir/<study>/`` and keeps its section of the page, ``finish`` writes
+    ``out_dir/index.html`` (contents, one section per study, appendix, run times) and
+    ``studies.json`` and returns the page's path. The writer keeps no study result: a caller
+    that adds each result as soon as its study finishes can let its arrays go before the next
+    study runs (``nonholo study`` does; the leader study's recorded runs are ~300 MB)."""
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    sections, contents, summary, citations, times = [], [], {}, set(), []
-    progress = (options.progress_for("report", len(results), "sections") if options is not None
-                else Progress("report", len(results), "off"))
-    with progress:
-        for result in results:
+    def __init__(self, out_dir: Path, options: StudyOptions | None = None):
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.options = options
+        self.sections, self.contents, self.summary, self.citations, self.times = [], [], {}, set(), []
+        self.quick = False
+
+    def add(self, result: StudyResult) -> float:
+        """Write ``result``'s figures, data files and section; returns the seconds it took."""
+        from nonholo.studies.citations import find_citations
+
+        out_dir = self.out_dir
+        progress = (self.options.progress_for(f"report {result.name}", 1, "sections") if self.options is not None
+                    else Progress("report", 1, "off"))
+        with progress:
             progress.start(f"{result.name}: figures and data")
             started = time.perf_counter()
             folder = out_dir / result.name
@@ -134,46 +144,62 @@ def write_report(results: Sequence[StudyResult], out_dir: Path, options: StudyOp
             files = result.write_data(folder)
             spec_file = getattr(result, "spec_file", "leader.md")
             body = result.html_section(folder)
-            citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
+            self.citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
             body = decorate(body, spec_file)
             drawn = time.perf_counter() - started
-            times.append((result, drawn))
+            self.times.append((result.name, result.elapsed_s, drawn))
             links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>'
                                for f in files)
-            sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
-                            f'<p class="note">Data: {links}. Simulations and statistics took {result.elapsed_s:.1f} s '
-                            f"(wall time), figures and data files {drawn:.1f} s.</p>{body}</section>")
-            contents.append(_contents(result.name, result.title, body))
-            summary[result.name] = {"title": result.title, "elapsed_s": result.elapsed_s, "report_s": drawn,
-                                    "files": [f.relative_to(out_dir).as_posix() for f in files]}
+            self.sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
+                                 f'<p class="note">Data: {links}. Simulations and statistics took {result.elapsed_s:.1f} s '
+                                 f"(wall time), figures and data files {drawn:.1f} s.</p>{body}</section>")
+            self.contents.append(_contents(result.name, result.title, body))
+            self.summary[result.name] = {"title": result.title, "elapsed_s": result.elapsed_s, "report_s": drawn,
+                                         "files": [f.relative_to(out_dir).as_posix() for f in files]}
+            self.quick = self.quick or getattr(result, "quick", False)
             progress.done()
-    appendix = appendix_html(citations)
-    sections.append(f'<section id="appendix"><h1>Appendix: the specification sections and errata cited</h1>'
-                    f"{appendix}</section>")
-    contents.append(_contents("appendix", "Appendix: specification sections and errata cited", ""))
-    quick = any(getattr(r, "quick", False) for r in results)
-    rows = "".join(f'<tr><td class="text"><a href="#{escape(r.name)}">{escape(r.name)}</a></td>'
-                   f'<td class="num">{r.elapsed_s:.1f} s</td><td class="num">{drawn:.1f} s</td></tr>'
-                   for r, drawn in times)
-    header = ('<header><h1 style="margin-top:0.6em">nonholo study report</h1>'
-              f'<p class="note">Generated {escape(time.strftime("%Y-%m-%d %H:%M"))} by <code>nonholo study</code>'
-              + (" in QUICK MODE (coarser grids: not the canonical numbers)" if quick else "")
-              + ". Each section gives the differences from the thesis first (verdicts computed from the numbers: "
-              '<span class="holds">holds</span>, <span class="partly">partly</span>, <span class="fails">fails</span>, '
-              "note), then the tables and the figures. Citations such as “spec §5.3” or “erratum 19” link to the "
-              "appendix, which explains them.</p>"
-              f'<div class="scroll"><table><caption>Wall times</caption><thead><tr><th>study</th>'
-              f"<th>simulations and statistics</th><th>figures and data files</th></tr></thead><tbody>{rows}"
-              "</tbody></table></div></header>")
-    nav = f'<nav id="toc"><h2>Contents</h2><ol>{"".join(contents)}</ol></nav>'
-    page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>nonholo studies</title>"
-            f"<style>{_STYLE}</style></head><body>{nav}<main>{header}\n" + "\n".join(sections)
-            + "</main></body></html>\n")
-    path = out_dir / "index.html"
-    path.write_text(page, encoding="utf-8")
-    (out_dir / "studies.json").write_text(json.dumps(summary, indent=2))
-    return path
+        return drawn
+
+    def finish(self) -> Path:
+        """Write the page and ``studies.json``; returns the page's path."""
+        from nonholo.studies.citations import appendix_html
+
+        appendix = appendix_html(self.citations)
+        sections = [*self.sections, f'<section id="appendix"><h1>Appendix: the specification sections and errata '
+                                    f"cited</h1>{appendix}</section>"]
+        contents = [*self.contents, _contents("appendix", "Appendix: specification sections and errata cited", "")]
+        rows = "".join(f'<tr><td class="text"><a href="#{escape(name)}">{escape(name)}</a></td>'
+                       f'<td class="num">{elapsed:.1f} s</td><td class="num">{drawn:.1f} s</td></tr>'
+                       for name, elapsed, drawn in self.times)
+        header = ('<header><h1 style="margin-top:0.6em">nonholo study report</h1>'
+                  f'<p class="note">Generated {escape(time.strftime("%Y-%m-%d %H:%M"))} by <code>nonholo study</code>'
+                  + (" in QUICK MODE (coarser grids: not the canonical numbers)" if self.quick else "")
+                  + ". Each section gives the differences from the thesis first (verdicts computed from the numbers: "
+                  '<span class="holds">holds</span>, <span class="partly">partly</span>, <span class="fails">fails</span>, '
+                  "note), then the tables and the figures. Citations such as “spec §5.3” or “erratum 19” link to the "
+                  "appendix, which explains them.</p>"
+                  f'<div class="scroll"><table><caption>Wall times</caption><thead><tr><th>study</th>'
+                  f"<th>simulations and statistics</th><th>figures and data files</th></tr></thead><tbody>{rows}"
+                  "</tbody></table></div></header>")
+        nav = f'<nav id="toc"><h2>Contents</h2><ol>{"".join(contents)}</ol></nav>'
+        page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+                f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>nonholo studies</title>"
+                f"<style>{_STYLE}</style></head><body>{nav}<main>{header}\n" + "\n".join(sections)
+                + "</main></body></html>\n")
+        path = self.out_dir / "index.html"
+        path.write_text(page, encoding="utf-8")
+        (self.out_dir / "studies.json").write_text(json.dumps(self.summary, indent=2))
+        return path
+
+
+def write_report(results: Sequence[StudyResult], out_dir: Path, options: StudyOptions | None = None) -> Path:
+    """Write every study's figures and data under ``out_dir/<study>/`` and the page
+    ``out_dir/index.html`` (``ReportWriter``); returns the page's path. Progress per study
+    section if ``options.progress``."""
+    writer = ReportWriter(out_dir, options)
+    for result in results:
+        writer.add(result)
+    return writer.finish()
 
 
 def chosen_studies(names: Sequence[str] | None) -> list:
@@ -188,13 +214,19 @@ def chosen_studies(names: Sequence[str] | None) -> list:
     return sorted((studies[name] for name in chosen), key=lambda s: (s.order, s.name))
 
 
+def each_result(names: Sequence[str] | None, options: StudyOptions) -> Iterator[StudyResult]:
+    """Run the named studies in report order, yielding each result as soon as its study
+    finishes (and keeping none)."""
+    for study in chosen_studies(names):
+        yield study.run(options)
+
+
 def run_each(names: Sequence[str] | None, options: StudyOptions,
              on_result: Callable[[StudyResult], None] | None = None) -> list[StudyResult]:
     """Run the named studies in report order; ``on_result`` sees each result as soon as its
     study finishes (the command prints its tables then)."""
     results = []
-    for study in chosen_studies(names):
-        result = study.run(options)
+    for result in each_result(names, options):
         results.append(result)
         if on_result is not None:
             on_result(result)
