@@ -151,3 +151,22 @@ def test_progress_logs_when_not_a_terminal(monkeypatch):
     assert any("running: first" in line for line in lines)
     assert lines[-1].startswith("study demo: 2/2 steps, ") and lines[-1].endswith("(done: second)")
     assert all(len(line.encode()) <= 100 for line in lines)
+
+
+def test_the_report_writer_keeps_no_study_result(tmp_path):
+    # nonholo study adds each result as soon as its study finishes and drops it: the writer
+    # must not keep it (the leader study's recorded runs are ~300 MB)
+    import gc
+    import weakref
+
+    from nonholo.studies.report import ReportWriter
+
+    writer = ReportWriter(tmp_path)
+    result = _Result("leader", "leader.md", '<h2 id="leader-tables">Tables</h2><p>spec §5.3</p>')
+    alive = weakref.ref(result)
+    writer.add(result)
+    del result
+    gc.collect()
+    assert alive() is None
+    page = writer.finish().read_text(encoding="utf-8")
+    assert 'id="leader-tables"' in page and 'id="appendix"' in page
