@@ -134,7 +134,7 @@ class ReportWriter:
         from nonholo.studies.citations import find_citations
 
         out_dir = self.out_dir
-        progress = (self.options.progress_for(f"report {result.name}", 1, "sections") if self.options is not None
+        progress = (self.options.progress_for(f"report {result.name}", 1, "section") if self.options is not None
                     else Progress("report", 1, "off"))
         with progress:
             progress.start(f"{result.name}: figures and data")
