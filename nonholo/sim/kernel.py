@@ -798,14 +798,15 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
-    named = {"run_alone_a": run_alone_a, **({"run_alone_b": run_alone_b} if two_laws else {})}
-    inner = (root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate,
-             integrate_alone, score, score_alone)
-    named.update((function.py_func.__name__, function) for function in inner)
-    for name, function in named.items():
+    inner = {function.py_func.__name__: function for function in (
+        root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate,
+        integrate_alone, score, score_alone)}
+    inner["run_alone_a"] = run_alone_a   # both named run_alone
+    if two_laws:
+        inner["run_alone_b"] = run_alone_b
+    for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
-    inner = tuple(named.values())
-    for function in inner:   # and every module-level function their code calls
+    for function in inner.values():   # and every module-level function their code calls
         stable_cache_identity(function)
     if followers:
         return Kernel(integrate, evaluate, score, None, None)

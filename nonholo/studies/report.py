@@ -126,7 +126,7 @@ class ReportWriter:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.options = options
-        self.sections, self.contents, self.summary, self.citations, self.times = [], [], {}, set(), []
+        self.sections, self.contents, self.summary, self.citations = [], [], {}, set()
         self.quick = False
 
     def add(self, result: StudyResult) -> float:
@@ -147,7 +147,6 @@ class ReportWriter:
             self.citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
             body = decorate(body, spec_file)
             drawn = time.perf_counter() - started
-            self.times.append((result.name, result.elapsed_s, drawn))
             links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>'
                                for f in files)
             self.sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
@@ -169,8 +168,8 @@ class ReportWriter:
                                     f"cited</h1>{appendix}</section>"]
         contents = [*self.contents, _contents("appendix", "Appendix: specification sections and errata cited", "")]
         rows = "".join(f'<tr><td class="text"><a href="#{escape(name)}">{escape(name)}</a></td>'
-                       f'<td class="num">{elapsed:.1f} s</td><td class="num">{drawn:.1f} s</td></tr>'
-                       for name, elapsed, drawn in self.times)
+                       f'<td class="num">{entry["elapsed_s"]:.1f} s</td>'
+                       f'<td class="num">{entry["report_s"]:.1f} s</td></tr>' for name, entry in self.summary.items())
         header = ('<header><h1 style="margin-top:0.6em">nonholo study report</h1>'
                   f'<p class="note">Generated {escape(time.strftime("%Y-%m-%d %H:%M"))} by <code>nonholo study</code>'
                   + (" in QUICK MODE (coarser grids: not the canonical numbers)" if self.quick else "")
