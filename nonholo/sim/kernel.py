@@ -34,10 +34,13 @@ first, and integrates each robot with its command held.
 
 Inside the loops over the batch only functions of scalars and tuples are called (the kernel's
 own helpers inlined by numba, the laws inlined by LLVM): a called function that writes through
-an array argument reference-counts it on every iteration, which stops vectorization. The kernel mutates ``state``, ``branch``, ``stats``,
-``pair_stats``, ``record``, ``held`` and ``step_rate``, and can be resumed (``k_start``,
-``k_stop``) so that callers can show progress. One kernel is compiled per pair of root laws
-and per "has followers" (``make_kernel``) and cached on disk by numba.
+an array argument reference-counts it on every iteration, which stops vectorization. The
+kernel mutates ``state``, ``branch``, ``stats``, ``pair_stats``, ``record``, ``held`` and
+``step_rate``, and can be resumed (``k_start``, ``k_stop``) so that callers can show progress.
+The loops over the batch are compiled per pair of root laws and per "has followers"
+(``make_kernel``); lone roots run one at a time (``run_alone``: single runs, scoring) by code
+compiled once for every law, which calls the law through its address
+(``nonholo.sim.lawcall``). Everything is cached on disk by numba.
 """
 from __future__ import annotations
 
@@ -49,11 +52,13 @@ import numpy as np
 from numba import njit
 from numba.core.dispatcher import Dispatcher
 
+from nonholo.control.declare import GOAL_FIELDS
 from nonholo.control.formation import separation_bearing_law, separation_separation_law
 from nonholo.models.formation_geometry import link_geometry
 from nonholo.models.formation_kinematics import bearing_rate, separation_rate
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.numerics import sincos, wrap_angle
+from nonholo.sim.lawcall import REF_SIZE, law_at_address, law_entry, row_address, stable_cache_identity, stack_copy
 from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
 
 # The robot loops read and write many rows of distinct arrays, which LLVM cannot prove
@@ -271,28 +276,6 @@ def stage_rate(stage, xi_speed):
     return max(abs(stage[6]), xi_speed * abs(stage[4]) / max(abs(stage[3]), 1e-300))
 
 
-def stable_cache_identity(dispatcher, _seen=None) -> None:
-    """Give ``dispatcher`` and every compiled function its code calls (recursively) a
-    deterministic pickling identity.
-
-    numba keys its disk cache of a closure on the pickled closure variables; a law pickles
-    *with the functions it calls*, each with a random per-process uuid unless one was set.
-    Without this every process would recompile every kernel.
-    """
-    seen = set() if _seen is None else _seen
-    if id(dispatcher) in seen:
-        return
-    seen.add(id(dispatcher))
-    function = dispatcher.py_func
-    if getattr(dispatcher, "_MemoMixin__uuid", None) is None:
-        dispatcher._set_uuid(f"{function.__module__}.{function.__qualname__}")
-    called = [function.__globals__.get(name) for name in function.__code__.co_names]
-    called += [cell.cell_contents for cell in function.__closure__ or ()]
-    for value in called:
-        if isinstance(value, Dispatcher):
-            stable_cache_identity(value, seen)
-
-
 @njit(inline="always", **_OPTIONS)
 def robot_stats(stats, r, b):
     """A robot's running statistics, rows 0 … ``ROBOT_STATS`` − 1 (E_MEAN … FIRST_SINGULAR), as
@@ -358,6 +341,131 @@ def idle_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 IdleFields = namedtuple("IdleFields", ("unused",))
 
 
+@njit(error_model="numpy", fastmath=False)
+def goal_errors(gx, gy, gtheta, x, y, theta):
+    """(position error norm, signed heading error) of a pose against (gx, gy, gθ). Compiled
+    on its own without FMA contraction (LLVM inlines it), so that every kernel computes the
+    same norm whatever the code around it."""
+    ex, ey = gx - x, gy - y
+    return math.sqrt(ex * ex + ey * ey), wrap_angle(gtheta - theta)
+
+
+@njit(inline="always", **_OPTIONS)
+def root_errors(posture, fields, r, b, x, y, theta, ref):
+    """(position error norm, signed heading error) against the reference or the goal."""
+    if posture:
+        return goal_errors(fields[0, r, b], fields[1, r, b], fields[2, r, b], x, y, theta)
+    return goal_errors(ref[REF_X], ref[REF_Y], ref[REF_THETA], x, y, theta)
+
+
+
+@njit(**_OPTIONS)
+def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps,
+              stats, record, step_rate, given):
+    """``integrate`` of lone root r of copy b under continuous-time control, its state and
+    statistics in registers from k_start to k_stop: for a few copies, the loops over the
+    batch (with LLVM's run-time overlap checks at each entry) cost more than they do. With
+    ``given`` states (N+1, 4, R, B), not empty, it scores them instead (sub-steps 0).
+
+    ``root`` is ``(address, posture, measuring)``: the law's entry
+    (``nonholo.sim.lawcall.law_entry``), 1 for a posture law, and 1 to measure the turn rates
+    (``step_rate``: a posture law's start-up is not known in advance). The law is called
+    through its address, so this function is compiled once for every law (a single run pays
+    a few nanoseconds per law evaluation for it: about 5 % of its time)."""
+    address, posture, measuring = root
+    recording = record.shape[1] != 0
+    scoring = given.shape[0] != 0
+    gains_i = (address, stack_copy(field_row(fields, r, b)))
+    x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+    v_max, omega_max = limits[0, r, b], limits[1, r, b]
+    sample = robot_stats(stats, r, b)
+    for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+        if scoring:
+            x, y, theta, xi = given[k, 0, r, b], given[k, 1, r, b], given[k, 2, r, b], given[k, 3, r, b]
+        row = row_start[k]
+        ref = row_values(rows, row)
+        v, omega, _, singular, sat_v, sat_w, _, _ = root_command(law_at_address, gains_i, x, y, theta, xi,
+                                                                 row_address(rows, row), v_max, omega_max)
+        err1, err2 = root_errors(posture != 0, fields, r, b, x, y, theta, ref)
+        sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
+        if recording:
+            store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
+                                                     0.0, singular, sat_v, sat_w))
+        if measuring != 0:
+            step_rate[k] = max(step_rate[k], abs(omega))
+        if k == n_steps:
+            break
+        m = substeps[k]
+        for j in range(m):
+            new, s1, s2, s3, s4 = root_rk4_fused(law_at_address, gains_i, x, y, theta, xi,
+                                                 row_address(rows, row + 2 * j), row_address(rows, row + 2 * j + 1),
+                                                 row_address(rows, row + 2 * j + 2), dt / m, v_max, omega_max)
+            x, y, theta, xi = new
+            if measuring != 0:
+                step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                   stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+    state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
+    store_stats(stats, r, b, sample)
+
+
+@njit(**_OPTIONS)
+def integrate_alone(roots, state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents,
+                    feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats,
+                    pair_stats, record, held, step_rate, held_given):
+    """``integrate`` (same arguments after ``roots``) for lone roots under continuous-time
+    control, one robot at a time (``run_alone``): the faster for a few copies
+    (``ALONE_BELOW``). ``roots`` (2, 2) int64: (entry address, posture) of the laws of
+    ``ROOT_A`` and ``ROOT_B`` robots (``Kernel.alone`` binds it); turn rates are measured
+    for every robot if either law is a posture law, as ``integrate`` does."""
+    no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
+    measuring = roots[0, 1] | roots[1, 1]
+    for r in range(state.shape[1]):
+        root = (roots[1, 0], roots[1, 1], measuring) if kinds[r] == ROOT_B else (roots[0, 0], roots[0, 1], measuring)
+        for b in range(state.shape[2]):
+            run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
+                      n_steps, stats, record, step_rate, no_states)
+
+
+@njit(**_OPTIONS)
+def score_alone(roots, states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max,
+                stats, pair_stats, record, hold_every, helds):
+    """``score`` (same arguments after ``roots``, see ``integrate_alone``) for lone roots
+    under continuous-time control (``hold_every`` 0): ``run_alone`` over the given states,
+    with no sub-steps."""
+    n_steps = states.shape[0] - 1
+    state = states[0].copy()
+    row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
+    k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
+    measuring = roots[0, 1] | roots[1, 1]
+    for r in range(state.shape[1]):
+        root = (roots[1, 0], roots[1, 1], measuring) if kinds[r] == ROOT_B else (roots[0, 0], roots[0, 1], measuring)
+        for b in range(state.shape[2]):
+            run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
+                      n_steps, stats, record, step_rate, states)
+
+
+class LoneRoots:
+    """``integrate_alone`` or ``score_alone`` for the roots of one kernel: ``roots`` is
+    ((law, gain class) of ROOT_A, that of ROOT_B or None). Their entries
+    (``nonholo.sim.lawcall.law_entry``) are made on the first call, so runs that never use
+    this function never compile them."""
+
+    def __init__(self, function, roots):
+        self.function, self.roots, self.table = function, roots, None
+
+    def __call__(self, *args):
+        if self.table is None:
+            self.table = np.zeros((2, 2), dtype=np.int64)
+            for i, root in enumerate(self.roots):
+                if root is not None:
+                    law, gains = root
+                    self.table[i] = law_entry(law, gains).address, gains._fields[:3] == GOAL_FIELDS
+        rows = np.ascontiguousarray(args[3], dtype=np.float64)   # the law reads reference rows by address
+        if rows.ndim != 2 or rows.shape[1] != REF_SIZE:
+            raise ValueError(f"reference rows must be (rows, {REF_SIZE}), got {rows.shape}")
+        return self.function(self.table, *args[:3], rows, *args[4:])
+
+
 class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone", "score_alone"))):
     """The compiled functions of one kernel (``make_kernel``); ``alone`` and ``score_alone``
     are None for graphs with followers. numba compiles each on its first call: a run pays
@@ -393,8 +501,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       states (N+1, 4, R, B), and with ``hold_every`` > 0 the commands each robot held,
       helds (N+1, HELD_COUNT, R, B)), by the same code;
     * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
-      time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies); None for
-      graphs with followers;
+      time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies): the
+      module's ``integrate_alone``, the same compiled code for every law (``LoneRoots``
+      binds these laws' entries); None for graphs with followers;
     * ``score_alone``: ``score`` (same arguments) for lone roots under continuous-time
       control, one robot at a time through ``alone``'s code; None for graphs with followers
       (``Kernel.scorer`` picks).
@@ -408,8 +517,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # is the graph, not the arithmetic, and nearly singular l–l passages are sensitive to it.
     _OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract"} if not followers else False)
     n_a, n_b = len(gains_a._fields), len(gains_b._fields)
-    posture_a = gains_a._fields[:3] == ("goal_x", "goal_y", "goal_theta")
-    posture_b = gains_b._fields[:3] == ("goal_x", "goal_y", "goal_theta")
+    posture_a = gains_a._fields[:3] == GOAL_FIELDS
+    posture_b = gains_b._fields[:3] == GOAL_FIELDS
     # Turn rates not known in advance (followers, posture laws' start-up) are measured.
     measuring = followers or posture_a or posture_b
     two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
@@ -420,16 +529,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # call overhead); compiled once each in kernels with followers, whose per-step work dwarfs
     # a call and whose inlined copies made up most of their compile time.
     inline = "never" if followers else "always"
-
-    @njit(inline="always", **_OPTIONS)
-    def root_errors(posture, fields, r, b, x, y, theta, ref):
-        """(position error norm, signed heading error) against the reference or the goal."""
-        if posture:
-            gx, gy, gtheta = fields[0, r, b], fields[1, r, b], fields[2, r, b]
-        else:
-            gx, gy, gtheta = ref[REF_X], ref[REF_Y], ref[REF_THETA]
-        ex, ey = gx - x, gy - y
-        return math.sqrt(ex * ex + ey * ey), wrap_angle(gtheta - theta)
 
     @njit(inline=inline, **_OPTIONS)
     def evaluate_at(state, fields, limits, ref, targets, target_row, offsets, kinds, order, parents, branch, sin_floor,
@@ -640,60 +739,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                                                   state[1, r, b], cos_t, sin_t, theta, fields[OFFSET_D, r, b])
                 branch[r, b] = continuous_bearing(raw, branch[r, b])
 
-    def alone_of(law, gains, n_fields, posture):
-        """``run_alone`` for roots under ``law``: the law is a constant of the closure, not an
-        argument, so that the compiled function's signature names no law type (numba keeps
-        one cache index for every kernel's ``run_alone``: an entry whose types cannot be
-        loaded, e.g. a law registered by a test and since removed, would break them all)."""
-
-        @njit(**_OPTIONS)
-        def run_alone(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps,
-                      stats, record, step_rate, given):
-            """``integrate`` of lone root r of copy b under continuous-time control, its state
-            and statistics in registers from k_start to k_stop: for a few copies, the loops
-            over the batch (with LLVM's run-time overlap checks at each entry) cost more than
-            they do. With ``given`` states (N+1, 4, R, B), not empty, it scores them instead
-            (sub-steps 0)."""
-            recording = record.shape[1] != 0
-            scoring = given.shape[0] != 0
-            gains_i = gains(*field_row(fields, r, b)[:n_fields])
-            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-            v_max, omega_max = limits[0, r, b], limits[1, r, b]
-            sample = robot_stats(stats, r, b)
-            for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
-                if scoring:
-                    x, y, theta, xi = given[k, 0, r, b], given[k, 1, r, b], given[k, 2, r, b], given[k, 3, r, b]
-                row = row_start[k]
-                ref = row_values(rows, row)
-                v, omega, _, singular, sat_v, sat_w, _, _ = command(law, gains_i, x, y, theta, xi, ref, v_max,
-                                                                    omega_max)
-                err1, err2 = root_errors(posture, fields, r, b, x, y, theta, ref)
-                sample = add_sample_(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
-                if recording:
-                    store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
-                                                             0.0, singular, sat_v, sat_w))
-                if measuring:
-                    step_rate[k] = max(step_rate[k], abs(omega))
-                if k == n_steps:
-                    break
-                m = substeps[k]
-                for j in range(m):
-                    new, s1, s2, s3, s4 = root_rk4(law, gains_i, x, y, theta, xi,
-                                                   ref if j == 0 else row_values(rows, row + 2 * j),
-                                                   row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2),
-                                                   dt / m, v_max, omega_max)
-                    x, y, theta, xi = new
-                    if measuring:
-                        step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
-                                           stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
-            state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
-            store_stats(stats, r, b, sample)
-
-        return run_alone
-
-    run_alone_a = alone_of(law_a, gains_a, n_a, posture_a)
-    run_alone_b = alone_of(law_b, gains_b, n_b, posture_b) if two_laws else run_alone_a
-
     @njit(**_OPTIONS)
     def integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
                   branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
@@ -739,41 +784,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         step_rate[k] = max(step_rate[k], abs(instant[I_OMEGA, r, b]))
 
     @njit(**_OPTIONS)
-    def integrate_alone(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents,
-                        feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats,
-                        pair_stats, record, held, step_rate, held_given):
-        """``integrate`` (same arguments) for lone roots under continuous-time control, one
-        robot at a time (``run_alone``): the faster for a few copies (``ALONE_BELOW``), and a
-        function of its own, compiled only for runs that use it."""
-        no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
-        for r in range(state.shape[1]):
-            for b in range(state.shape[2]):
-                if two_laws and kinds[r] == ROOT_B:
-                    run_alone_b(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
-                                n_steps, stats, record, step_rate, no_states)
-                else:
-                    run_alone_a(r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
-                                n_steps, stats, record, step_rate, no_states)
-
-    @njit(**_OPTIONS)
-    def score_alone(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max,
-                    stats, pair_stats, record, hold_every, helds):
-        """``score`` (same arguments) for lone roots under continuous-time control
-        (``hold_every`` 0): ``run_alone`` over the given states, with no sub-steps."""
-        n_steps = states.shape[0] - 1
-        state = states[0].copy()
-        row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
-        k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
-        for r in range(state.shape[1]):
-            for b in range(state.shape[2]):
-                if two_laws and kinds[r] == ROOT_B:
-                    run_alone_b(r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
-                                n_steps, stats, record, step_rate, states)
-                else:
-                    run_alone_a(r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
-                                n_steps, stats, record, step_rate, states)
-
-    @njit(**_OPTIONS)
     def score(states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max, stats,
               pair_stats, record, hold_every, helds):
         n_robots, n_batch = states.shape[2], states.shape[3]
@@ -799,15 +809,12 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
-        root_errors, evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate,
-        integrate_alone, score, score_alone)}
-    inner["run_alone_a"] = run_alone_a   # both named run_alone
-    if two_laws:
-        inner["run_alone_b"] = run_alone_b
+        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)}
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls
         stable_cache_identity(function)
     if followers:
         return Kernel(integrate, evaluate, score, None, None)
-    return Kernel(integrate, evaluate, score, integrate_alone, score_alone)
+    roots = ((law_a, gains_a), (law_b, gains_b) if two_laws else None)
+    return Kernel(integrate, evaluate, score, LoneRoots(integrate_alone, roots), LoneRoots(score_alone, roots))

@@ -38,7 +38,8 @@ from nonholo.control.registry import initial_state
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.references.feedforward import REF_V
 from nonholo.sim import kernel as kn
-from nonholo.sim.kernel import field_row, root_command_exact, stable_cache_identity
+from nonholo.sim.kernel import field_row, root_command_exact
+from nonholo.sim.lawcall import law_at_address, law_entry, stack_copy
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import kernel_for
@@ -195,13 +196,14 @@ class _HermiteTable:
 
 
 def _compiled_steps(law, fields_class, table, one: _OneRobot, duration, settings):
-    run = _dormand_prince(law, fields_class)
+    address = law_entry(law, fields_class).address
     capacity = 4096
     while True:
         t_out = np.empty(capacity)
         y_out = np.empty((capacity, 4))
-        count = run(one.state0, one.fields[:, 0, 0].copy(), one.limits[:, 0, 0].copy(), table.flat, table.spacing, table.direction,
-                    duration, settings.rtol, settings.atol, duration * settings.max_step_fraction, t_out, y_out)
+        count = _dormand_prince(address, one.state0, one.fields[:, 0, 0].copy(), one.limits[:, 0, 0].copy(),
+                                table.flat, table.spacing, table.direction, duration, settings.rtol, settings.atol,
+                                duration * settings.max_step_fraction, t_out, y_out)
         if count > 0:
             return t_out[:count], y_out[:count]
         if count == -1:
@@ -244,24 +246,13 @@ def _reference_row(flat, spacing, direction, t):
             omega)
 
 
-def _dormand_prince(law, fields_class):
-    """The compiled solver loop for ``law`` (cached per law, on disk by numba)."""
-    if law not in _DORMAND_PRINCE:
-        _DORMAND_PRINCE[law] = _make_dormand_prince(law, fields_class)
-    return _DORMAND_PRINCE[law]
-
-
-_DORMAND_PRINCE: dict = {}
-
-
-# Not cached on its own (the solver loop that calls it is, with its code inside): its signature
-# names the law's types, and numba keeps one cache index for every law's entry.
-@njit(error_model="numpy")
-def _rates_at(law, t, y, flat, spacing, direction, gains_i, v_max, omega_max, out):
-    """Closed-loop state rates (ẋ, ẏ, θ̇, ξ̇) of one robot at time t into ``out``."""
-    ref = _reference_row(flat, spacing, direction, t)
-    v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command_exact(law, gains_i, y[0], y[1], y[2], y[3], ref, v_max,
-                                                                  omega_max)
+@njit(**_OPTIONS)
+def _rates_at(gains_i, t, y, flat, spacing, direction, v_max, omega_max, out):
+    """Closed-loop state rates (ẋ, ẏ, θ̇, ξ̇) of one robot at time t into ``out``; the law
+    through its entry (``gains_i``: see ``nonholo.sim.lawcall.law_at_address``)."""
+    ref = stack_copy(_reference_row(flat, spacing, direction, t))
+    v, omega, xi_dot, _, _, _, cos_t, sin_t = root_command_exact(law_at_address, gains_i, y[0], y[1], y[2], y[3], ref,
+                                                                  v_max, omega_max)
     out[0], out[1], out[2] = unicycle_rates(v, omega, cos_t, sin_t)
     out[3] = xi_dot
 
@@ -283,93 +274,88 @@ def _copy(source, target):
         target[j] = source[j]
 
 
-def _make_dormand_prince(law, fields_class):
-    # Only this closure captures ``law`` (and module-level functions): numba then caches it
-    # on disk across processes (see nonholo.sim.kernel.make_kernel).
-    stable_cache_identity(law)
-    n_fields = len(fields_class._fields)
-
-    @njit(**_OPTIONS)
-    def run(y0, gains, limits, flat, spacing, direction, t_end, rtol, atol, max_step, t_out, y_out):
-        """Integrate from 0 to t_end; store every accepted step (t = 0 first). Returns the
-        number of samples, 0 if ``t_out`` is too short, −1 if the step size collapsed."""
-        gains_i = fields_class(*field_row(gains.reshape(kn.MAX_FIELDS, 1, 1), 0, 0)[:n_fields])
-        v_max, omega_max = limits[0], limits[1]
-        n = 4
-        K = np.empty((7, n))
-        y = y0.copy()
-        f = np.empty(n)
-        _rates_at(law, 0.0, y, flat, spacing, direction, gains_i, v_max, omega_max, f)
-        # Initial step (scipy.integrate._ivp.common.select_initial_step, error order 4).
-        scale, ahead, f1, change = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        for j in range(n):
-            scale[j] = atol + abs(y[j]) * rtol
-        d0, d1 = _rms_scaled(y, scale), _rms_scaled(f, scale)
-        h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-        h0 = min(h0, t_end)
-        for j in range(n):
-            ahead[j] = y[j] + h0 * f[j]
-        _rates_at(law, h0, ahead, flat, spacing, direction, gains_i, v_max, omega_max, f1)
-        for j in range(n):
-            change[j] = f1[j] - f[j]
-        d2 = _rms_scaled(change, scale) / h0
-        h1 = max(1e-6, h0 * 1e-3) if (d1 <= 1e-15 and d2 <= 1e-15) else (0.01 / max(d1, d2)) ** (1.0 / 5.0)
-        h_abs = min(100 * h0, h1, t_end, max_step)
-        t = 0.0
-        count = 0
-        t_out[0] = t
-        _copy(y, y_out[0])
-        count = 1
-        y_new = np.empty(n)
-        stage = np.empty(n)
-        while t < t_end:
-            min_step = 10 * abs(np.nextafter(t, np.inf) - t)
-            h_abs = min(max(h_abs, min_step), max_step)
-            rejected = False
-            while True:
-                if h_abs < min_step:
-                    return -1
-                t_new = min(t + h_abs, t_end)
-                h = t_new - t
-                _copy(f, K[0])
-                for s in range(1, 6):
-                    for j in range(n):
-                        acc = 0.0
-                        for m in range(s):
-                            acc += _A[s, m] * K[m, j]
-                        stage[j] = y[j] + h * acc
-                    _rates_at(law, t + _C[s] * h, stage, flat, spacing, direction, gains_i, v_max, omega_max, K[s])
+@njit(**_OPTIONS)
+def _dormand_prince(address, y0, gains, limits, flat, spacing, direction, t_end, rtol, atol, max_step, t_out, y_out):
+    """Integrate from 0 to t_end; store every accepted step (t = 0 first). Returns the
+    number of samples, 0 if ``t_out`` is too short, −1 if the step size collapsed. The law
+    is called through its entry at ``address`` (``nonholo.sim.lawcall``), so this loop is
+    compiled once for every law."""
+    gains_i = (address, stack_copy(field_row(gains.reshape(kn.MAX_FIELDS, 1, 1), 0, 0)))
+    v_max, omega_max = limits[0], limits[1]
+    n = 4
+    K = np.empty((7, n))
+    y = y0.copy()
+    f = np.empty(n)
+    _rates_at(gains_i, 0.0, y, flat, spacing, direction, v_max, omega_max, f)
+    # Initial step (scipy.integrate._ivp.common.select_initial_step, error order 4).
+    scale, ahead, f1, change = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for j in range(n):
+        scale[j] = atol + abs(y[j]) * rtol
+    d0, d1 = _rms_scaled(y, scale), _rms_scaled(f, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t_end)
+    for j in range(n):
+        ahead[j] = y[j] + h0 * f[j]
+    _rates_at(gains_i, h0, ahead, flat, spacing, direction, v_max, omega_max, f1)
+    for j in range(n):
+        change[j] = f1[j] - f[j]
+    d2 = _rms_scaled(change, scale) / h0
+    h1 = max(1e-6, h0 * 1e-3) if (d1 <= 1e-15 and d2 <= 1e-15) else (0.01 / max(d1, d2)) ** (1.0 / 5.0)
+    h_abs = min(100 * h0, h1, t_end, max_step)
+    t = 0.0
+    count = 0
+    t_out[0] = t
+    _copy(y, y_out[0])
+    count = 1
+    y_new = np.empty(n)
+    stage = np.empty(n)
+    while t < t_end:
+        min_step = 10 * abs(np.nextafter(t, np.inf) - t)
+        h_abs = min(max(h_abs, min_step), max_step)
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                return -1
+            t_new = min(t + h_abs, t_end)
+            h = t_new - t
+            _copy(f, K[0])
+            for s in range(1, 6):
                 for j in range(n):
                     acc = 0.0
-                    for m in range(6):
-                        acc += _B[m] * K[m, j]
-                    y_new[j] = y[j] + h * acc
-                _rates_at(law, t + h, y_new, flat, spacing, direction, gains_i, v_max, omega_max, K[6])
-                total = 0.0
-                for j in range(n):
-                    err = 0.0
-                    for m in range(7):
-                        err += _E[m] * K[m, j]
-                    ratio = err * h / (atol + max(abs(y[j]), abs(y_new[j])) * rtol)
-                    total += ratio * ratio
-                error_norm = math.sqrt(total / n)
-                if error_norm < 1.0:
-                    factor = MAX_FACTOR if error_norm == 0.0 else min(MAX_FACTOR,
-                                                                       SAFETY * error_norm ** ERROR_EXPONENT)
-                    if rejected:
-                        factor = min(1.0, factor)
-                    h_abs = h * factor
-                    break
-                h_abs = h * max(MIN_FACTOR, SAFETY * error_norm ** ERROR_EXPONENT)
-                rejected = True
-            t = t_new
-            _copy(y_new, y)
-            _copy(K[6], f)
-            if count == t_out.size:
-                return 0
-            t_out[count] = t
-            _copy(y, y_out[count])
-            count += 1
-        return count
+                    for m in range(s):
+                        acc += _A[s, m] * K[m, j]
+                    stage[j] = y[j] + h * acc
+                _rates_at(gains_i, t + _C[s] * h, stage, flat, spacing, direction, v_max, omega_max, K[s])
+            for j in range(n):
+                acc = 0.0
+                for m in range(6):
+                    acc += _B[m] * K[m, j]
+                y_new[j] = y[j] + h * acc
+            _rates_at(gains_i, t + h, y_new, flat, spacing, direction, v_max, omega_max, K[6])
+            total = 0.0
+            for j in range(n):
+                err = 0.0
+                for m in range(7):
+                    err += _E[m] * K[m, j]
+                ratio = err * h / (atol + max(abs(y[j]), abs(y_new[j])) * rtol)
+                total += ratio * ratio
+            error_norm = math.sqrt(total / n)
+            if error_norm < 1.0:
+                factor = MAX_FACTOR if error_norm == 0.0 else min(MAX_FACTOR,
+                                                                   SAFETY * error_norm ** ERROR_EXPONENT)
+                if rejected:
+                    factor = min(1.0, factor)
+                h_abs = h * factor
+                break
+            h_abs = h * max(MIN_FACTOR, SAFETY * error_norm ** ERROR_EXPONENT)
+            rejected = True
+        t = t_new
+        _copy(y_new, y)
+        _copy(K[6], f)
+        if count == t_out.size:
+            return 0
+        t_out[count] = t
+        _copy(y, y_out[count])
+        count += 1
+    return count
 
-    return run
