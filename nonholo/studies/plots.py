@@ -25,6 +25,11 @@ MAX_PLOT_POINTS = 2500
 ERROR_FLOOR = 1e-7  # m: the lower limit of logarithmic error axes
 DPI = 100
 ROBUST_PERCENTILES = (0.25, 99.75)
+# Matplotlib settings of the report's figures (``ReportWriter.add`` applies them). Titles sit
+# at the top of their axes: none of our axes has decorations above it, which is all that
+# matplotlib's automatic title placement looks for, at the cost of a tight bounding box of
+# every axis at every draw (a third of the report's drawing time).
+FIGURE_STYLE = {"axes.titley": 1.0}
 
 # Distinct colour, dash pattern and width per series; drawn widest first.
 _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")

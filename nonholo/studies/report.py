@@ -131,7 +131,10 @@ class ReportWriter:
 
     def add(self, result: StudyResult) -> float:
         """Write ``result``'s figures, data files and section; returns the seconds it took."""
+        import matplotlib
+
         from nonholo.studies.citations import find_citations
+        from nonholo.studies.plots import FIGURE_STYLE
 
         out_dir = self.out_dir
         progress = (self.options.progress_for(f"report {result.name}", 1, "section") if self.options is not None
@@ -141,9 +144,10 @@ class ReportWriter:
             started = time.perf_counter()
             folder = out_dir / result.name
             folder.mkdir(parents=True, exist_ok=True)
-            files = result.write_data(folder)
+            with matplotlib.rc_context(FIGURE_STYLE):
+                files = result.write_data(folder)
+                body = result.html_section(folder)
             spec_file = getattr(result, "spec_file", "leader.md")
-            body = result.html_section(folder)
             self.citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
             body = decorate(body, spec_file)
             drawn = time.perf_counter() - started
