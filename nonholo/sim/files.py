@@ -194,9 +194,7 @@ class _Reader:
             return references.THESIS_TESTS[kind](direction=direction, **params)
         except ScenarioError as exc:   # the reference names its own field: point to it in the file
             self.fail(f"reference.{exc.field}" if exc.field else "reference", exc.problem)
-        except NonholoInputError as exc:
-            self.fail("reference", str(exc))
-        except ValueError as exc:
+        except ValueError as exc:   # NonholoInputError included
             self.fail("reference", str(exc))
 
     def _parameter(self, value, field: str, kind: str):

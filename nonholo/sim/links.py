@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -150,13 +150,8 @@ class LinkSettings:
         return self.default.ideal and all(model.ideal for _, model in self.links)
 
     def describe(self) -> dict:
-        def model(m: LinkModel) -> dict:
-            return {"delay": m.delay, "jitter": m.jitter, "loss": m.loss, "reorder": m.reorder}
-        w = self.watchdog
-        return {"seed": int(self.seed), **model(self.default),
-                "links": {f"{p}->{c}": model(m) for (p, c), m in self.links},
-                "watchdog": {"stale_after": w.stale_after, "resume_after": w.resume_after, "decel_v": w.decel_v,
-                             "decel_omega": w.decel_omega}}
+        return {"seed": int(self.seed), **asdict(self.default),
+                "links": {f"{p}->{c}": asdict(m) for (p, c), m in self.links}, "watchdog": asdict(self.watchdog)}
 
 
 def _number(data: dict, key: str, where: str, default: float, high: float, fail) -> float:

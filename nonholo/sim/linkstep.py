@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import astuple
 
 import numpy as np
 from numba import njit
@@ -150,9 +151,8 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
     schedule, depth = group_schedules(settings, names, group.parents, instants, period)
     watchdog = np.empty((4, n_batch))
     for b, links in enumerate(settings):
-        w = links.watchdog if links is not None else None
-        watchdog[:, b] = (w.stale_after, w.resume_after, w.decel_v, w.decel_omega) if w is not None else \
-            (math.inf, 1, 0.0, 0.0)   # ideal links: every state fresh, the watchdog never acts
+        # ideal links (None): every state fresh, the watchdog never acts
+        watchdog[:, b] = astuple(links.watchdog) if links is not None else (math.inf, 1, 0.0, 0.0)
     ring = np.zeros((MESSAGE, depth, n_robots, n_batch))
     inbox = np.zeros((MESSAGE, 2, n_robots, n_batch))
     used = np.full((2, n_robots, n_batch), -1, dtype=np.int64)

@@ -10,7 +10,6 @@ if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.b
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from nonholo.sim.metrics import goal_errors  # noqa: E402
 from nonholo.sim.scenario import Follower, Robot  # noqa: E402
 
 # Start-up transients can be 100× the steady commands; the v and ω panels show the
@@ -93,7 +92,7 @@ def _links(formation):
 
 
 def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
-    formation = result.formations[member]
+    formation = result.scenarios[member]
     t = result.t
     x, y, theta = (result.trajectory(f, member) for f in ("x", "y", "theta"))
     v, omega = result.trajectory("v", member), result.trajectory("omega", member)
@@ -110,7 +109,7 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
         ax_w.plot(t, omega[i], color=color, lw=1, label=robot.name)
         if isinstance(robot, Robot) and robot.posture:
             ax_path.plot(*robot.goal[:2], "*", color=color, ms=14)
-            distance, _ = goal_errors(x[i], y[i], theta[i], robot.goal)
+            distance = np.hypot(x[i] - robot.goal[0], y[i] - robot.goal[1])
             ax_err.semilogy(t, np.maximum(distance, 1e-16), color=color, lw=1.2, label=f"{robot.name}: distance to goal (m)")
         elif isinstance(robot, Follower):
             e1, e2 = result.output_errors(i, member)
@@ -181,7 +180,7 @@ def animate(result, path, member: int = 0, frames: int = 120, fps: int = 20, tra
     reference; ``progress`` shows a bar while frames are rendered."""
     from matplotlib.animation import FFMpegWriter, FuncAnimation
 
-    formation = result.formations[member]
+    formation = result.scenarios[member]
     t = result.t
     shown = list(range(min(max_robots, len(formation.robots))))
     x, y, theta = (result.trajectory(f, member)[shown] for f in ("x", "y", "theta"))

@@ -11,7 +11,6 @@ import numpy as np
 from nonholo.control.posture import HEADING_CONTROLLED
 from nonholo.references.feedforward import REF_COLUMNS
 from nonholo.sim import kernel as k
-from nonholo.sim import metrics as m
 from nonholo.sim.scenario import Follower, Robot, Scenario
 from nonholo.sim.targets import target_segments
 
@@ -23,6 +22,21 @@ HEADING_NOTE = ("the dynamic-feedback posture law regulates the position only: t
 TABLE_COLUMNS = (("x", "m", k.REC_X), ("y", "m", k.REC_Y), ("theta", "rad", k.REC_THETA), ("xi", "", k.REC_XI),
                  ("v", "m/s", k.REC_V), ("omega", "rad/s", k.REC_OMEGA), ("error_1", "", k.REC_ERR1),
                  ("error_2", "", k.REC_ERR2))
+
+
+# Settling: from a change until the error of the changed output stays within this fraction of its size.
+SETTLING_BAND = 0.02
+
+
+def settling_time(t: np.ndarray, error: np.ndarray, at: float, band: float, until: float = np.inf) -> float | None:
+    """Seconds from ``at`` until |error| stays ≤ ``band`` over the samples in (at, until];
+    None if the last sample of the window is still outside the band."""
+    window = (t > at + 1e-9 * max(1.0, abs(at))) & (t <= until + 1e-9 * max(1.0, abs(until)))
+    outside = np.flatnonzero(np.abs(error[window]) > band)
+    if outside.size == 0:
+        return 0.0
+    times = t[window]
+    return None if outside[-1] == times.size - 1 else float(times[outside[-1] + 1] - at)
 
 
 def _none_if_inf(value: float):
@@ -201,17 +215,16 @@ class SimulationResult:
                 "peak_omega_time": s(k.W_PEAK_T), "rms_v": math.sqrt(s(k.V_SQ) / samples),
                 "rms_omega": math.sqrt(s(k.W_SQ) / samples), "effort": float(self.t[-1]) * (s(k.V_SQ) + s(k.W_SQ)) / samples}
 
+    def _robot_metrics(self, robot, member: int) -> dict:
+        i = self.index(robot)
+        return Metrics.from_stats(self.stats[:, i:i + 1, member], self.t.size, float(self.t[-1])).robot(0, self.t.size)
+
     def tracking_metrics(self, robot, member: int = 0) -> dict:
         """Position-error norm statistics of a tracking root (m)."""
-        i, samples, s = self.index(robot), self.t.size, lambda name: self._stat(name, self.index(robot), member)
-        var = s(k.E_M2) / samples
-        return {"mean": s(k.E_MEAN), "std": math.sqrt(var), "var": var, "rms": math.sqrt(s(k.E_SQ) / samples),
-                "max": s(k.E_MAX), "final": s(k.E_FINAL)}
+        return self._robot_metrics(robot, member)["error"]
 
     def heading_metrics(self, robot, member: int = 0) -> dict:
-        samples, s = self.t.size, lambda name: self._stat(name, self.index(robot), member)
-        return {"mean": s(k.H_SUM) / samples, "rms": math.sqrt(s(k.H_SQ) / samples), "max": s(k.H_MAX),
-                "final": s(k.H_FINAL)}
+        return self._robot_metrics(robot, member)["heading_error"]
 
     def posture_metrics(self, robot, member: int = 0) -> dict:
         i = self.index(robot)
@@ -260,8 +273,8 @@ class SimulationResult:
                 if segment is None:
                     entry[f"{name}_disturbance"] = float(np.abs(errors[output][self.t > change.at]).max())
                 else:
-                    band = m.SETTLING_BAND * abs(segment[2] - segment[1])
-                    entry[f"{name}_settling_time"] = m.settling_time(self.t, errors[output], change.at, band, until)
+                    band = SETTLING_BAND * abs(segment[2] - segment[1])
+                    entry[f"{name}_settling_time"] = settling_time(self.t, errors[output], change.at, band, until)
                     entry[f"{name}_target"] = segment[2]
             entries.append(entry)
         return entries

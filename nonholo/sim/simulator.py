@@ -196,7 +196,7 @@ class Group:
         return branch
 
 
-def _structure(robot, scenario: Scenario, index: dict) -> tuple:
+def _structure(robot, index: dict) -> tuple:
     """What copies integrated together must share, for one robot (parents as positions)."""
     if isinstance(robot, Robot):
         return ("root", robot.controller.law, robot.posture)
@@ -217,7 +217,7 @@ def _check_batch(scenarios: list[Scenario]) -> None:
     def key(s):
         index = {n: i for i, n in enumerate(s.names)}
         return (s.names, tuple(type(r).__name__ for r in s.robots), tuple(r.parents for r in s.robots),
-                tuple(_structure(r, s, index) for r in s.robots), reference(s), s.duration, s.dt, s.method,
+                tuple(_structure(r, index) for r in s.robots), reference(s), s.duration, s.dt, s.method,
                 s.control_period, s.substeps)
 
     if len(scenarios) == 1:
@@ -278,7 +278,6 @@ def _prior_rate(robots, v_peak: float, omega_peak: float, known: dict) -> float:
 
 def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: float) -> list[Group]:
     first = scenarios[0]
-    index = {n: i for i, n in enumerate(first.names)}
     poses = [s.initial_poses() for s in scenarios]
     by_key = defaultdict(list)
     known: dict = {}
@@ -295,11 +294,8 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
             plan = prior_plan(first, rate)
             plans[rate] = next((p for p in plans.values() if np.array_equal(p, plan)), plan)
         prior = plans[rate]
-        if len(robots) == 1:
-            shape = (_structure(robots[0], first, {}),)
-        else:
-            local = {first.names[i]: j for j, i in enumerate(component)}
-            shape = tuple(_structure(r, first, local) for r in robots)
+        local = {first.names[i]: j for j, i in enumerate(component)}
+        shape = tuple(_structure(r, local) for r in robots)
         by_key[laws, shape, id(prior)].append((component, prior))
     groups = []
     for (laws, _, _), entries in by_key.items():
@@ -507,11 +503,11 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 scenario.hold_every)
         outputs = (stats, pair_stats, records, held, step_rate)
         work = float(plan.sum()) * n_robots * n_batch
+        show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
         if linked(group):   # the link model: the kernel control period by control period (nonholo.sim.linkstep)
-            show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
             integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
         else:
-            _integrate_chunks(integrate, args, n_steps, work, scenario.name, n_robots * n_batch, progress, outputs)
+            _integrate_chunks(integrate, args, n_steps, scenario.name, n_robots * n_batch, show, outputs)
         if iteration == iterations - 1:   # the last run stands (its plan is the one returned)
             break
         needed = measured_plan(step_rate, group.prior, dt)
@@ -521,9 +517,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     return stats, pair_stats, records, plan
 
 
-def _integrate_chunks(integrate, args, n_steps, work, name, count, progress, outputs):
-    if progress is None:
-        progress = work > PROGRESS_WORK and sys.stderr.isatty()
+def _integrate_chunks(integrate, args, n_steps, name, count, progress, outputs):
     if not progress:
         integrate(*args, 0, n_steps, n_steps, *outputs, False)
         return
