@@ -97,3 +97,31 @@ def test_a_removed_law_does_not_break_the_cache_of_the_others(tmp_path):
         done = subprocess.run([sys.executable, "-c", RUN, str(ROOT), str(user), law], env=environment,
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0 and done.stdout.split()[-1] == "ok", done.stderr[-2000:]
+
+
+EDITED = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    sys.path.insert(0, sys.argv[2])
+    import nonholo
+    from nonholo import references
+    import edited_laws
+    robot = nonholo.Robot("r", nonholo.controller("edited-law"), (0.1, 0.2, 0.0))
+    run = nonholo.simulate(nonholo.Scenario(references.line(), [robot], duration=1.0, dt=0.01), record=False)
+    print(run.to_dict()["robots"]["r"]["control"]["peak_v"])
+""")
+
+
+def test_an_edited_law_is_compiled_again_not_served_from_the_cache(tmp_path):
+    # A single run calls the law through its C entry, cached on disk with the law's code in
+    # its key: editing the law's file must change the numbers, not load the old entry.
+    user = tmp_path / "user"
+    user.mkdir()
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    source = LAW_MODULE.replace("gone", "edited").replace("gains.k * (1.0 + 0.0 * x)", "FACTOR * gains.k")
+    for factor in (1.0, 2.0):
+        (user / "edited_laws.py").write_text(source.replace("FACTOR", str(factor)))
+        done = subprocess.run([sys.executable, "-c", EDITED, str(ROOT), str(user)], env=environment,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert float(done.stdout.split()[-1]) == factor
