@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, collector_for_long_work
 
 
 def register(subparsers) -> None:
@@ -31,25 +31,15 @@ def register(subparsers) -> None:
 def handle(args: argparse.Namespace) -> int:
     from nonholo.errors import NonholoInputError
     from nonholo.studies import StudyOptions
-    from nonholo.studies.report import ReportWriter, chosen_studies, each_result
+    from nonholo.studies.report import chosen_studies
 
     outcomes = []   # (name, wall time, ok) of each study: its result goes once its section is written
-    report_s = 0.0
     try:
         options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet, sampling=args.sampling)
         chosen_studies(args.names)  # unknown names fail before any work
-        writer = ReportWriter(options.out_dir, options)
-        for result in each_result(args.names, options):
-            if not args.quiet:   # a study's summary as soon as it finishes
-                print(result.text())
-                print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
-                      flush=True)
-            report_s += writer.add(result)
-            outcomes.append((result.name, result.elapsed_s, result.ok))
-            del result   # the report section is written: the next study runs without this one's arrays
-        started = time.perf_counter()
-        page = writer.finish()
-        report_s += time.perf_counter() - started
+        import nonholo.studies.plots  # noqa: F401  (matplotlib: imported before the collector is tuned)
+        with collector_for_long_work():
+            page, report_s = _run_studies(args, options, outcomes)
     except NonholoInputError as exc:
         print(f"nonholo study: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -63,6 +53,26 @@ def handle(args: argparse.Namespace) -> int:
         print(f"wall time: {command_wall_time():.1f} s in all; studies "
               + ", ".join(f"{name} {elapsed:.1f} s" for name, elapsed, _ in outcomes) + f", report {report_s:.1f} s")
     return EXIT_OK if all(ok for _, _, ok in outcomes) else EXIT_FAILURE
+
+
+def _run_studies(args, options, outcomes: list) -> tuple[Path, float]:
+    """Run the chosen studies, each one's report section written as soon as it finishes;
+    returns the page and the seconds spent on the report."""
+    from nonholo.studies.report import ReportWriter, each_result
+
+    report_s = 0.0
+    writer = ReportWriter(options.out_dir, options)
+    for result in each_result(args.names, options):
+        if not args.quiet:   # a study's summary as soon as it finishes
+            print(result.text())
+            print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
+                  flush=True)
+        report_s += writer.add(result)
+        outcomes.append((result.name, result.elapsed_s, result.ok))
+        del result   # the report section is written: the next study runs without this one's arrays
+    started = time.perf_counter()
+    page = writer.finish()
+    return page, report_s + time.perf_counter() - started
 
 
 _STARTED = time.perf_counter()
