@@ -6,7 +6,7 @@ import pytest
 from numba import njit
 
 from nonholo import references
-from nonholo.control.declare import LAWS
+from nonholo.control.declare import LAWS, POSITIVE, Gain, control_law, unregister
 from nonholo.control.registry import controller
 from nonholo.sim import kernel as kn
 from nonholo.sim.lawcall import law_at_address, law_entry, row_address, stack_copy
@@ -73,3 +73,45 @@ def test_reference_rows_that_a_law_cannot_read_by_address_are_refused():
     with pytest.raises(ValueError, match=r"reference rows must be \(rows, 10\)"):
         kernel.score_alone(states, fields, limits, np.zeros((3, 9)), *graph, stats, pairs,
                            np.empty((kn.REC_COUNT, 0, 1, 1)), 0, np.zeros((0, kn.HELD_COUNT, 1, 1)))
+
+
+@njit(error_model="numpy")
+def raising_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    if ref[0] > 0.5:
+        raise ValueError("the reference went past 0.5 s")
+    return gains.k, 0.0, 0.0, 0.0
+
+
+@njit(error_model="numpy")
+def untypable_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
+    return gains.k * undefined_name, 0.0, 0.0, 0.0  # noqa: F821
+
+
+def _registered(name, law):
+    control_law(name, title="a test law", source="tests", gains={"k": Gain(0.3, POSITIVE)},
+                stiffness=lambda g, v_d, omega_d: 1.0)(law)
+
+
+def test_a_law_that_raises_in_a_single_run_raises_there_too(capfd):
+    _registered("test-raising", raising_law)
+    try:
+        robot = Robot("r", controller("test-raising"), (0.0, 0.0, 0.0))
+        scenario = Scenario(references.line(), [robot], duration=1.0, dt=0.01)
+        with pytest.raises(ValueError, match="the reference went past"):   # the batch: the law's own error
+            simulate([scenario] * kn.ALONE_BELOW, record=False)
+        with pytest.raises(ValueError, match="control law raised an exception in a single run"):
+            simulate(scenario, record=False)
+        assert "Exception ignored" not in capfd.readouterr().err   # no traceback per step from the C entry
+    finally:
+        unregister("test-raising")
+
+
+def test_a_law_that_fails_to_compile_fails_again_not_with_a_crash():
+    _registered("test-untypable", untypable_law)
+    try:
+        scenario = Scenario(references.line(), [Robot("r", controller("test-untypable"))], duration=0.1, dt=0.01)
+        for _ in range(2):   # the second call once crashed on an entry address left at 0
+            with pytest.raises(Exception, match="undefined_name"):
+                simulate(scenario, record=False)
+    finally:
+        unregister("test-untypable")

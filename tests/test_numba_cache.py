@@ -114,13 +114,16 @@ EDITED = textwrap.dedent("""
 
 def test_an_edited_law_is_compiled_again_not_served_from_the_cache(tmp_path):
     # A single run calls the law through its C entry, cached on disk with the law's code in
-    # its key: editing the law's file must change the numbers, not load the old entry.
+    # its key: editing the law's body, or the order of its declared gains (the entry reads
+    # them by position), must change the numbers, not load the old entry.
     user = tmp_path / "user"
     user.mkdir()
     environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     source = LAW_MODULE.replace("gone", "edited").replace("gains.k * (1.0 + 0.0 * x)", "FACTOR * gains.k")
-    for factor in (1.0, 2.0):
-        (user / "edited_laws.py").write_text(source.replace("FACTOR", str(factor)))
+    source = source.replace('gains={"k": Gain(1.0, POSITIVE)}', 'gains={GAINS}')
+    k, j = '"k": Gain(1.0, POSITIVE)', '"j": Gain(3.0, POSITIVE)'
+    for factor, gains in ((1.0, f"{k}, {j}"), (2.0, f"{k}, {j}"), (2.0, f"{j}, {k}")):
+        (user / "edited_laws.py").write_text(source.replace("FACTOR", str(factor)).replace("GAINS", gains))
         done = subprocess.run([sys.executable, "-c", EDITED, str(ROOT), str(user)], env=environment,
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]

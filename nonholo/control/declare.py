@@ -22,6 +22,7 @@ law modules (the list of built-in laws).
 from __future__ import annotations
 
 import collections
+import hashlib
 import inspect
 import keyword
 import math
@@ -295,8 +296,12 @@ def _check_function(name, variant: str, function) -> None:
 
 def _gain_tuple(name: str, fields: tuple[str, ...], module_name: str) -> type:
     """The law's namedtuple class, picklable by reference: it is a global of the law's
-    module under a unique name (numba's disk cache pickles it with the kernels)."""
-    qualname = "_GainTuple_" + name.replace("-", "_")
+    module under a unique name (numba's disk cache pickles it with the kernels). The name
+    holds a digest of the fields in order: the cache keys of compiled code that reads the
+    gains by position then change when a declaration reorders or renames them (a pickle by
+    reference holds the name only)."""
+    digest = hashlib.sha256(",".join(fields).encode()).hexdigest()[:10]
+    qualname = f"_GainTuple_{name.replace('-', '_')}_{digest}"
     cls = collections.namedtuple(qualname, fields)
     cls.__module__ = module_name
     cls.__qualname__ = qualname

@@ -454,12 +454,15 @@ class LoneRoots:
         self.function, self.roots, self.table = function, roots, None
 
     def __call__(self, *args):
-        if self.table is None:
-            self.table = np.zeros((2, 2), dtype=np.int64)
+        if self.table is None:   # set only once complete: a law that fails to compile leaves None
+            table = np.zeros((2, 2), dtype=np.int64)
             for i, root in enumerate(self.roots):
                 if root is not None:
                     law, gains = root
-                    self.table[i] = law_entry(law, gains).address, gains._fields[:3] == GOAL_FIELDS
+                    table[i] = law_entry(law, gains).address, gains._fields[:3] == GOAL_FIELDS
+            if self.roots[1] is None:
+                table[1] = table[0]   # a one-law kernel: ROOT_B robots run law A, as in ``integrate``
+            self.table = table
         rows = np.ascontiguousarray(args[3], dtype=np.float64)   # the law reads reference rows by address
         if rows.ndim != 2 or rows.shape[1] != REF_SIZE:
             raise ValueError(f"reference rows must be (rows, {REF_SIZE}), got {rows.shape}")

@@ -11,7 +11,7 @@ small C-callable entry point of its own (``law_entry``), also cached.
   double θ, double cos θ, double sin θ, double ξ, double *ref, double *fields, double *out)``
   (ref: one reference row, ``REF_COLUMNS``; fields: a root's ``MAX_FIELDS`` fields, of which
   the law reads the first ``len(gains_class._fields)`` as its gain namedtuple; out: v, ω,
-  ξ̇, singular). One per law and gain class, per process.
+  ξ̇, singular, and 1.0 if the law raised). One per law and gain class, per process.
 * ``law_at_address``: a function with a law's signature whose ``ref`` is the address of a
   reference row (``row_address``, or ``stack_copy`` of a row) and whose ``gains`` are
   ``(entry address, fields address)`` (``stack_copy`` of the fields): code written for
@@ -23,6 +23,7 @@ law compiled into a kernel.
 from __future__ import annotations
 
 from llvmlite import ir
+import numpy as np
 from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.core.dispatcher import Dispatcher
@@ -30,7 +31,9 @@ from numba.extending import intrinsic
 
 REF_SIZE = 10      # a reference row (nonholo.references.feedforward.REF_COLUMNS)
 FIELDS_SIZE = 10   # a root's fields (nonholo.sim.kernel.MAX_FIELDS)
-OUT_SIZE = 4       # v, ω, ξ̇, singular
+OUT_SIZE = 5       # v, ω, ξ̇, singular, raised (1.0 if the law raised an exception)
+LAW_RAISED = ("the control law raised an exception in a single run, whose compiled code calls it through an "
+              "entry that cannot pass exceptions on: call the law from Python, or simulate 4 copies, to see it")
 _DOUBLE = types.float64
 _POINTER = types.CPointer(_DOUBLE)
 ENTRY_SIGNATURE = types.void(*(_DOUBLE,) * 6, _POINTER, _POINTER, _POINTER)
@@ -38,7 +41,7 @@ ENTRY_SIGNATURE = types.void(*(_DOUBLE,) * 6, _POINTER, _POINTER, _POINTER)
 
 @intrinsic
 def call_entry(typingctx, address, x, y, theta, cos_theta, sin_theta, xi, ref, fields):
-    """(v, ω, ξ̇, singular) of the law entry at ``address``: the state in registers, ``ref``
+    """(v, ω, ξ̇, singular, raised) of the law entry at ``address``: the state in registers, ``ref``
     and ``fields`` the addresses (integers) of a reference row and of the root's fields, the
     result through a buffer on the caller's stack (made once, in its entry block, on a cache
     line of its own)."""
@@ -67,7 +70,8 @@ def call_entry(typingctx, address, x, y, theta, cos_theta, sin_theta, xi, ref, f
 def stack_copy(typingctx, values):
     """The address (an integer) of a copy of the tuple of floats ``values`` in a buffer on
     the caller's stack, valid until the caller returns (one buffer per call site, made in
-    the caller's entry block)."""
+    the caller's entry block). Use the address only in the function that made it or in
+    functions it calls: a compiled function that returns it returns a dangling pointer."""
     if not isinstance(values, types.UniTuple) or values.dtype != _DOUBLE:
         return None
 
@@ -92,9 +96,13 @@ def row_address(rows, row):
 @njit(inline="always", error_model="numpy")
 def law_at_address(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     """A law's result through its entry: ``gains`` is ``(entry address, fields address)``
-    and ``ref`` the address of a reference row."""
+    and ``ref`` the address of a reference row. An exception the law raised is raised here
+    as ValueError(LAW_RAISED) (its own message cannot cross the C entry)."""
     address, fields = gains
-    return call_entry(address, x, y, theta, cos_theta, sin_theta, xi, ref, fields)
+    v, omega, xi_dot, singular, raised = call_entry(address, x, y, theta, cos_theta, sin_theta, xi, ref, fields)
+    if raised != 0.0:
+        raise ValueError(LAW_RAISED)
+    return v, omega, xi_dot, singular
 
 
 def stable_cache_identity(dispatcher, _seen=None) -> None:
@@ -143,6 +151,11 @@ def _make_entry(law, gains_class):
         fields = (f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9])
         ref = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9])
         gains = gains_class(*fields[:n_fields])
-        out[0], out[1], out[2], out[3] = law(x, y, theta, cos_theta, sin_theta, xi, ref, gains)
+        try:
+            out[0], out[1], out[2], out[3] = law(x, y, theta, cos_theta, sin_theta, xi, ref, gains)
+            out[4] = 0.0
+        except Exception:   # a C entry cannot raise: flag it for law_at_address
+            out[0] = out[1] = out[2] = out[3] = np.nan
+            out[4] = 1.0
 
     return cfunc(ENTRY_SIGNATURE, cache=True, error_model="numpy")(entry)
