@@ -63,12 +63,13 @@ def signals_interrupt():
             signal.signal(signum, handler)
 
 
-# Run as the ``nonholo`` program, the garbage collector looks at young objects every 10,000
+# Run as the ``nonholo`` program, the garbage collector looks at young objects every 2,000
 # allocations instead of 700: importing numba, scipy and matplotlib, numba's compiler and
 # matplotlib's figures make many short-lived containers, and with the default settings the
-# collector's passes took about a tenth of a warm ``nonholo study`` (``main`` sets it only
-# when it parses the process's own arguments, not when called from Python).
-PROGRAM_GC_THRESHOLD = (10_000, 10, 10)
+# collector's passes took about a tenth of a warm ``nonholo study``. (10,000 was no faster
+# and let a first run's peak memory grow by 70 MB: numba's compiler leaves large cycles.)
+# ``main`` sets it only when it parses the process's own arguments, not when called from Python.
+PROGRAM_GC_THRESHOLD = (2_000, 10, 10)
 
 
 @contextlib.contextmanager
