@@ -104,3 +104,14 @@ def test_reference_tables_kept_for_reuse_are_bounded():
     cache[b"e"] = huge
     sm.trim_reference_cache(cache, b"e")
     assert list(cache) == [b"e"]
+
+
+def test_a_large_batch_is_set_up_without_rebuilding_the_robot_list_per_robot(monkeypatch):
+    # ``Scenario.names`` builds a tuple of every robot's name per call: set-up code that calls
+    # it once per robot is quadratic (it took 10^4 robots from 0.4 s to 2 s per run)
+    calls = []
+    names = Scenario.names.fget
+    monkeypatch.setattr(Scenario, "names", property(lambda self: calls.append(1) or names(self)))
+    robots = [Robot(f"r{i}", controller("kanayama"), (0.01 * i, 0.0, 0.0)) for i in range(2000)]
+    run = simulate(Scenario(references.circle(), robots, duration=0.05, dt=0.01), record=False)
+    assert run.stats.shape[1] == 2000 and len(calls) < 50

@@ -294,7 +294,7 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
             plan = prior_plan(first, rate)
             plans[rate] = next((p for p in plans.values() if np.array_equal(p, plan)), plan)
         prior = plans[rate]
-        local = {first.names[i]: j for j, i in enumerate(component)}
+        local = {robot.name: j for j, robot in enumerate(robots)}   # (``Scenario.names`` is built per call)
         shape = tuple(_structure(r, local) for r in robots)
         by_key[laws, shape, id(prior)].append((component, prior))
     groups = []

@@ -229,7 +229,7 @@ def draw(variations: Sequence[Variation], samples: int, seed: int) -> np.ndarray
 def metric_columns(scenario: Scenario) -> list[str]:
     """The per-sample metric columns of a (varied part of a) scenario."""
     columns = [f"{r.name}.{m}" for r in scenario.robots for m in METRICS]
-    columns += [f"{scenario.names[c[0]]}.{m}" for c in scenario.components() if len(c) > 1 for m in FORMATION_METRICS]
+    columns += [f"{scenario.robots[c[0]].name}.{m}" for c in scenario.components() if len(c) > 1 for m in FORMATION_METRICS]
     return columns
 
 
