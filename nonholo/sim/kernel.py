@@ -50,7 +50,6 @@ from collections import namedtuple
 import llvmlite.binding
 import numpy as np
 from numba import njit
-from numba.core.dispatcher import Dispatcher
 
 from nonholo.control.declare import GOAL_FIELDS
 from nonholo.control.formation import separation_bearing_law, separation_separation_law
@@ -58,8 +57,9 @@ from nonholo.models.formation_geometry import link_geometry
 from nonholo.models.formation_kinematics import bearing_rate, separation_rate
 from nonholo.models.unicycle import unicycle_rates
 from nonholo.numerics import sincos, wrap_angle
-from nonholo.sim.lawcall import REF_SIZE, law_at_address, law_entry, row_address, stable_cache_identity, stack_copy
 from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
+from nonholo.sim.lawcall import (FIELDS_SIZE, REF_SIZE, law_at_address, law_entry, row_address, stable_cache_identity,
+                                 stack_copy)
 
 # The robot loops read and write many rows of distinct arrays, which LLVM cannot prove
 # disjoint; past its default of 8 run-time overlap checks it refuses to vectorize
@@ -75,7 +75,7 @@ llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
 llvmlite.binding.set_option("nonholo", "-inline-threshold=100000")
 
 ROOT_A, ROOT_B, SEPARATION_BEARING, SEPARATION_SEPARATION = range(4)
-MAX_FIELDS = 10
+MAX_FIELDS = FIELDS_SIZE   # a root's law fields (at most MAX_LAW_FIELDS); a follower uses 3
 K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
@@ -302,14 +302,14 @@ def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
             sat_w_sum + sat_w, singular_sum + singular, min(first_singular, t if singular > 0.0 else np.inf))
 
 
-
-
 # Compiled once per process as functions of their own (LLVM inlines them into the kernels),
 # not copied into every kernel by numba: one variant per kernel kind, as ``root_command``.
 add_sample_exact = njit(error_model="numpy", fastmath=False)(add_sample)
 add_sample = njit(error_model="numpy", fastmath={"contract"})(add_sample)
 add_sample_exact._set_uuid(f"{__name__}.add_sample_exact")
 add_sample._set_uuid(f"{__name__}.add_sample")
+
+
 @njit(inline="always", **_OPTIONS)
 def store_stats(stats, r, b, values):
     """Write a robot's running statistics (``robot_stats``, ``add_sample``) back."""
@@ -357,6 +357,14 @@ def root_errors(posture, fields, r, b, x, y, theta, ref):
         return goal_errors(fields[0, r, b], fields[1, r, b], fields[2, r, b], x, y, theta)
     return goal_errors(ref[REF_X], ref[REF_Y], ref[REF_THETA], x, y, theta)
 
+
+@njit(inline="always", **_OPTIONS)
+def lone_root(roots, kinds, r):
+    """``run_alone``'s ``root`` for robot r: its law's (entry address, posture) from the
+    (2, 2) table ``roots`` (row 0: ROOT_A, row 1: ROOT_B), and whether to measure turn rates
+    (for every robot if either law is a posture law, as ``integrate`` does)."""
+    row = 1 if kinds[r] == ROOT_B else 0
+    return roots[row, 0], roots[row, 1], roots[0, 1] | roots[1, 1]
 
 
 @njit(**_OPTIONS)
@@ -415,12 +423,10 @@ def integrate_alone(roots, state, fields, limits, rows, row_start, substeps, tar
     """``integrate`` (same arguments after ``roots``) for lone roots under continuous-time
     control, one robot at a time (``run_alone``): the faster for a few copies
     (``ALONE_BELOW``). ``roots`` (2, 2) int64: (entry address, posture) of the laws of
-    ``ROOT_A`` and ``ROOT_B`` robots (``Kernel.alone`` binds it); turn rates are measured
-    for every robot if either law is a posture law, as ``integrate`` does."""
+    ``ROOT_A`` and ``ROOT_B`` robots (``Kernel.alone`` binds it, ``lone_root``)."""
     no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
-    measuring = roots[0, 1] | roots[1, 1]
     for r in range(state.shape[1]):
-        root = (roots[1, 0], roots[1, 1], measuring) if kinds[r] == ROOT_B else (roots[0, 0], roots[0, 1], measuring)
+        root = lone_root(roots, kinds, r)
         for b in range(state.shape[2]):
             run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
                       n_steps, stats, record, step_rate, no_states)
@@ -436,9 +442,8 @@ def score_alone(roots, states, fields, limits, rows, targets, offsets, kinds, or
     state = states[0].copy()
     row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
     k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
-    measuring = roots[0, 1] | roots[1, 1]
     for r in range(state.shape[1]):
-        root = (roots[1, 0], roots[1, 1], measuring) if kinds[r] == ROOT_B else (roots[0, 0], roots[0, 1], measuring)
+        root = lone_root(roots, kinds, r)
         for b in range(state.shape[2]):
             run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
                       n_steps, stats, record, step_rate, states)
@@ -446,7 +451,7 @@ def score_alone(roots, states, fields, limits, rows, targets, offsets, kinds, or
 
 class LoneRoots:
     """``integrate_alone`` or ``score_alone`` for the roots of one kernel: ``roots`` is
-    ((law, gain class) of ROOT_A, that of ROOT_B or None). Their entries
+    ((law, gain class, posture) of ROOT_A, that of ROOT_B or None). Their entries
     (``nonholo.sim.lawcall.law_entry``) are made on the first call, so runs that never use
     this function never compile them."""
 
@@ -458,8 +463,8 @@ class LoneRoots:
             table = np.zeros((2, 2), dtype=np.int64)
             for i, root in enumerate(self.roots):
                 if root is not None:
-                    law, gains = root
-                    table[i] = law_entry(law, gains).address, gains._fields[:3] == GOAL_FIELDS
+                    law, gains, posture = root
+                    table[i] = law_entry(law, gains).address, posture
             if self.roots[1] is None:
                 table[1] = table[0]   # a one-law kernel: ROOT_B robots run law A, as in ``integrate``
             self.table = table
@@ -819,5 +824,5 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         stable_cache_identity(function)
     if followers:
         return Kernel(integrate, evaluate, score, None, None)
-    roots = ((law_a, gains_a), (law_b, gains_b) if two_laws else None)
+    roots = ((law_a, gains_a, posture_a), (law_b, gains_b, posture_b) if two_laws else None)
     return Kernel(integrate, evaluate, score, LoneRoots(integrate_alone, roots), LoneRoots(score_alone, roots))

@@ -22,15 +22,18 @@ law compiled into a kernel.
 """
 from __future__ import annotations
 
-from llvmlite import ir
 import numpy as np
+from llvmlite import ir
 from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.core.dispatcher import Dispatcher
 from numba.extending import intrinsic
 
-REF_SIZE = 10      # a reference row (nonholo.references.feedforward.REF_COLUMNS)
-FIELDS_SIZE = 10   # a root's fields (nonholo.sim.kernel.MAX_FIELDS)
+from nonholo.control.declare import MAX_LAW_FIELDS
+from nonholo.references.feedforward import REF_COLUMNS
+
+REF_SIZE = len(REF_COLUMNS)    # a reference row
+FIELDS_SIZE = MAX_LAW_FIELDS   # a root's fields (the kernel's ``MAX_FIELDS``)
 OUT_SIZE = 5       # v, ω, ξ̇, singular, raised (1.0 if the law raised an exception)
 LAW_RAISED = ("the control law raised an exception in a single run, whose compiled code calls it through an "
               "entry that cannot pass exceptions on: call the law from Python, or simulate 4 copies, to see it")

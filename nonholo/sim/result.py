@@ -305,9 +305,8 @@ class SimulationResult:
             if robot.posture:
                 out["posture"] = self.posture_metrics(i, member)
             else:
-                tracking = self.tracking_metrics(i, member)
-                out["error"] = tracking
-                out["heading_error"] = self.heading_metrics(i, member)
+                metrics = self._robot_metrics(i, member)
+                out["error"], out["heading_error"] = metrics["error"], metrics["heading_error"]
         else:
             out.update({"formation_law": robot.law, "gains": {"k1": robot.k1, "k2": robot.k2}, "d": robot.d,
                         "targets": dict(zip(robot.outputs, robot.targets))})

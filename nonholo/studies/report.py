@@ -224,20 +224,14 @@ def each_result(names: Sequence[str] | None, options: StudyOptions) -> Iterator[
         yield study.run(options)
 
 
-def run_each(names: Sequence[str] | None, options: StudyOptions,
-             on_result: Callable[[StudyResult], None] | None = None) -> list[StudyResult]:
-    """Run the named studies in report order; ``on_result`` sees each result as soon as its
-    study finishes (the command prints its tables then)."""
+def run_studies(names: Sequence[str] | None, options: StudyOptions,
+                on_result: Callable[[StudyResult], None] | None = None) -> tuple[list[StudyResult], Path]:
+    """Run the named studies (all if ``names`` is empty or None) and write the report;
+    ``on_result`` sees each result as soon as its study finishes. ``nonholo study`` instead
+    writes each section as its study ends and keeps no result (``ReportWriter``)."""
     results = []
     for result in each_result(names, options):
         results.append(result)
         if on_result is not None:
             on_result(result)
-    return results
-
-
-def run_studies(names: Sequence[str] | None, options: StudyOptions,
-                on_result: Callable[[StudyResult], None] | None = None) -> tuple[list[StudyResult], Path]:
-    """Run the named studies (all if ``names`` is empty or None) and write the report."""
-    results = run_each(names, options, on_result)
     return results, write_report(results, options.out_dir, options)

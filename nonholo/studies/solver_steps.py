@@ -234,7 +234,7 @@ def _hermite(flat, spacing, t, column):
     return value, slope / spacing, curvature / (spacing * spacing)
 
 
-@njit(**_OPTIONS)   # compiled once for every law (LLVM inlines it), not copied into each law's solver
+@njit(**_OPTIONS)   # compiled once (LLVM inlines it into the solver loop)
 def _reference_row(flat, spacing, direction, t):
     """The reference row (``REF_COLUMNS``) at time t: interpolated flat outputs and the
     flatness feedforward of ``nonholo.references.feedforward`` (same formulas)."""
@@ -260,7 +260,7 @@ def _rates_at(gains_i, t, y, flat, spacing, direction, v_max, omega_max, out):
 @njit(inline="always", **_OPTIONS)
 def _rms_scaled(values, scale):
     """RMS of values / scale (element-wise; scalar loops: numba's array expressions and
-    slice assignments cost seconds of compile time per law)."""
+    slice assignments cost seconds of compile time)."""
     total = 0.0
     for j in range(values.size):
         ratio = values[j] / scale[j]
