@@ -11,9 +11,21 @@ polynomials on [−π/4, π/4]; the error is within a few ulp of libm for |x| < 
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from numba import njit
+
+
+
+def is_real(value) -> bool:
+    """A finite real number (numpy scalars included, booleans not); Python floats and ints
+    are checked without the slower abstract-base-class test (sweeps check 10⁴ gain sets)."""
+    kind = type(value)
+    if kind is float or kind is int:
+        return math.isfinite(value)
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
 
 _TWO_OVER_PI = 0.63661977236758134308
 # π/2 split into three parts (fdlibm pio2_1, pio2_2, pio2_3): k·part is exact for |k| < 2^20.

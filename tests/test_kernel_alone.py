@@ -1,5 +1,5 @@
 """A few copies of lone roots run one robot at a time (``Kernel.alone``, state and statistics
-in registers); many copies run in loops over the batch (``Kernel.integrate``). Both must give
+in registers); many copies run in loops over the batch (``Kernel.roots``). Both must give
 the same trajectories, statistics and event counts, for every law, with limits, singular
 passages, sub-steps and posture goals."""
 import dataclasses
@@ -66,6 +66,24 @@ def test_several_lone_roots_of_two_laws_alone():
               Robot("c", controller("kanayama", kx=2.0), (0.1, -0.4, 0.2))]
     one, many = runs(Scenario(references.circle(), robots, duration=10.0, dt=0.01))
     assert_same(one, many)
+
+
+def test_batches_past_one_chunk_integrate_every_copy_alike():
+    # ``roots`` runs ROOTS_CHUNK copies at a time: copies in the second, partial chunk and on
+    # both sides of the boundary follow the same trajectories as one copy alone
+    robot = Robot("r", controller("kanayama"), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
+    scenario = Scenario(references.eight(), [robot], duration=3.0, dt=0.01)
+    copies = kn.ROOTS_CHUNK + 5
+    members = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(2.0 + 0.01 * i, -1.5, 0.3)),))
+               for i in range(copies)]
+    many = simulate(members)
+    rows = list(range(kn.ROBOT_STATS))
+    for i in (0, kn.ROOTS_CHUNK - 1, kn.ROOTS_CHUNK, copies - 1):
+        one = simulate(members[i])
+        assert np.allclose(one.stats[rows, 0, 0], many.stats[rows, 0, i], rtol=1e-12, atol=1e-12)
+        assert np.allclose(one.record[..., 0], many.record[..., i], rtol=1e-12, atol=1e-10)
+    # and the copies differ (a chunk that ran one copy's state for another would not)
+    assert not np.allclose(many.record[kn.REC_X, -1, 0, 0], many.record[kn.REC_X, -1, 0, copies - 1])
 
 
 def score_both(scenario: Scenario, record: np.ndarray):

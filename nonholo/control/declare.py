@@ -36,6 +36,7 @@ from types import MappingProxyType
 import numpy as np
 
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
+from nonholo.numerics import is_real
 
 LAW_PARAMETERS = ("x", "y", "theta", "cos_theta", "sin_theta", "xi", "ref", "gains")
 GOAL_FIELDS = ("goal_x", "goal_y", "goal_theta")
@@ -89,7 +90,7 @@ def check_gains(owner: str, values: Mapping, accepted: tuple[str, ...], defaults
     for name, value in values.items():
         if name not in accepted:
             raise NonholoInputError(f"unknown gain {name!r} for {owner} (gains: {', '.join(accepted)})")
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        if not is_real(value):
             raise NonholoInputError(f"gain {name!r} of {owner} must be a finite number, got {value!r}")
     for alias, targets in aliases.items():
         if alias in values:

@@ -23,9 +23,10 @@ spread the range of the ratios of the same round.
 **Where the time goes** (``step_profile``, ``nonholo bench --profile``): the batch step taken
 apart with the kernel's own compiled pieces run alone over the same batch — one law evaluation
 (``root_command``: sin/cos of θ, the law, the actuator limits), one RK4 step (``root_rk4``: four
-evaluations, the plant, the combination), the kernel's ``evaluate`` (the sample at t_k) and
-``score`` (the sample and the running statistics) — and the single run taken apart into the
-reference table, the recording and the rest.
+evaluations, the plant, the combination; the sample at t_k takes the first stage's command),
+the kernel's ``evaluate`` (a sample at t_k: its law evaluation, errors, stores) and ``score``
+(the sample and the running statistics), and a run of two steps (the Python set-up and
+result) — and the single run taken apart into the reference table, the recording and the rest.
 """
 from __future__ import annotations
 
@@ -258,10 +259,11 @@ def _probe_rk4(law, gains, state, rows, h, n_steps):
 
 
 PROFILE_PARTS = (
-    ("law", "law: 5 evaluations (4 RK4 stages, the sample at t_k)"),
+    ("law", "law: 4 evaluations (the sample takes the first)"),
     ("plant_rk4", "plant and RK4 combination"),
-    ("sample", "the sample at t_k beyond its law: errors, stored"),
+    ("sample", "the sample at t_k: errors, stored"),
     ("statistics", "running statistics and event counts"),
+    ("setup", "set-up and result (Python, once per run)"),
     ("rest", "the rest: loops, memory traffic"),
     ("step", "whole step (the batch figure)"),
 )
@@ -303,17 +305,19 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
         score(states, fields, limits, samples, targets, offsets, kinds, order, parents, np.zeros((1, robots)),
               batch.sin_floor, np.zeros(robots), stats, pair_stats, no_record, 0, helds)
 
+    short = batch_scenario(robots, 2 * DT)   # two steps: the run's set-up and result alone
     say("the batch step's parts")
     times = interleaved({
+        "setup": lambda: simulate(short, record=False),
         "command": lambda: _probe_commands(law, gains, state, rows, n_steps, sink),
         "rk4": lambda: _probe_rk4(law, gains, state.copy(), rows, DT, n_steps),
         "evaluate": sample_all, "score": score_all,
         "step": lambda: simulate(batch, record=False)}, rounds)
     ns = {name: 1e9 * statistics.median(values) / (robots * n_steps) for name, values in times.items()}
-    parts = {"law": 5.0 * ns["command"], "plant_rk4": ns["rk4"] - 4.0 * ns["command"],
+    parts = {"law": 4.0 * ns["command"], "plant_rk4": ns["rk4"] - 4.0 * ns["command"],
              "sample": ns["evaluate"] - ns["command"], "statistics": ns["score"] - ns["evaluate"],
-             "step": ns["step"]}
-    parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "statistics"))
+             "setup": ns["setup"], "step": ns["step"]}
+    parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "statistics", "setup"))
     say("the single run's parts")
     single = single_scenario()
     table_times = np.arange(2 * single.n_steps + 1) * (DT / 2)

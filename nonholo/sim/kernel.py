@@ -34,7 +34,11 @@ first, and integrates each robot with its command held.
 
 Inside the loops over the batch only functions of scalars and tuples are called (the kernel's
 own helpers inlined by numba, the laws inlined by LLVM): a called function that writes through
-an array argument reference-counts it on every iteration, which stops vectorization. The
+an array argument reference-counts it on every iteration, which stops vectorization; and
+copy indices are never negative as LLVM sees them (a loop from 0, or unsigned bounds),
+or the wrap-around of negative indices it keeps stops vectorization too. Lone roots under
+continuous-time control sample at t_k the command of the first stage of the RK4 step from
+t_k (the law at the same state and reference row), not a fifth evaluation. The
 kernel mutates ``state``, ``branch``, ``stats``, ``pair_stats``, ``record``, ``held`` and
 ``step_rate``, and can be resumed (``k_start``, ``k_stop``) so that callers can show progress.
 The loops over the batch are compiled per pair of root laws and per "has followers"
@@ -89,6 +93,9 @@ assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK,
 # (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
 # LLVM's run-time overlap checks (tens of comparisons) at every step.
 ALONE_BELOW = 4
+# Batches of lone roots under continuous-time control run this many copies at a time through
+# the whole time loop (``Kernel.roots``): their state and statistics stay in the core's caches.
+ROOTS_CHUNK = 256
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
@@ -242,9 +249,10 @@ def _make_root_rk4(command, fastmath):
     def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
         """One classical RK4 step of a root under ``law``, the four stages in registers: the
         new (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate
-        measures."""
+        measures; the first stage's also ends with its (singular, sat v, sat ω): it is the
+        command at the step's start, which the sample at t_k takes."""
         half = 0.5 * h
-        v1, w1, e1, _, _, _, c, s = command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
+        v1, w1, e1, singular, sat_v, sat_w, c, s = command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
         a1, b1, c1 = unicycle_rates(v1, w1, c, s)
         x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
         v2, w2, e2, _, _, _, c, s = command(law, gains, x2, y2, t2, xi2, r1, v_max, omega_max)
@@ -258,7 +266,7 @@ def _make_root_rk4(command, fastmath):
         sixth = h / 6.0
         return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
                  rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
-                (x, y, theta, xi, e1, v1, w1), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
+                (x, y, theta, xi, e1, v1, w1, singular, sat_v, sat_w), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
                 (x4, y4, t4, xi4, e4, v4, w4))
 
     return njit(error_model="numpy", fastmath=fastmath)(root_rk4)
@@ -392,26 +400,31 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
             x, y, theta, xi = given[k, 0, r, b], given[k, 1, r, b], given[k, 2, r, b], given[k, 3, r, b]
         row = row_start[k]
         ref = row_values(rows, row)
-        v, omega, _, singular, sat_v, sat_w, _, _ = root_command(law_at_address, gains_i, x, y, theta, xi,
-                                                                 row_address(rows, row), v_max, omega_max)
-        err1, err2 = root_errors(posture != 0, fields, r, b, x, y, theta, ref)
+        x0, y0, theta0, xi0 = x, y, theta, xi
+        if scoring or k == n_steps:   # no step follows: the law alone
+            v, omega, _, singular, sat_v, sat_w, _, _ = root_command(law_at_address, gains_i, x, y, theta, xi,
+                                                                     row_address(rows, row), v_max, omega_max)
+        else:   # the first RK4 stage's command is the one in force at t_k (as in ``roots``)
+            v = omega = singular = sat_v = sat_w = 0.0
+            m = substeps[k]
+            for j in range(m):
+                new, s1, s2, s3, s4 = root_rk4_fused(law_at_address, gains_i, x, y, theta, xi,
+                                                     row_address(rows, row + 2 * j),
+                                                     row_address(rows, row + 2 * j + 1),
+                                                     row_address(rows, row + 2 * j + 2), dt / m, v_max, omega_max)
+                if j == 0:
+                    v, omega, singular, sat_v, sat_w = s1[5], s1[6], s1[7], s1[8], s1[9]
+                x, y, theta, xi = new
+                if measuring != 0:
+                    step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                       stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+        err1, err2 = root_errors(posture != 0, fields, r, b, x0, y0, theta0, ref)
         sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
         if recording:
-            store_record(record, k, r, b, record_row(x, y, theta, xi, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
+            store_record(record, k, r, b, record_row(x0, y0, theta0, xi0, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
                                                      0.0, singular, sat_v, sat_w))
         if measuring != 0:
             step_rate[k] = max(step_rate[k], abs(omega))
-        if k == n_steps:
-            break
-        m = substeps[k]
-        for j in range(m):
-            new, s1, s2, s3, s4 = root_rk4_fused(law_at_address, gains_i, x, y, theta, xi,
-                                                 row_address(rows, row + 2 * j), row_address(rows, row + 2 * j + 1),
-                                                 row_address(rows, row + 2 * j + 2), dt / m, v_max, omega_max)
-            x, y, theta, xi = new
-            if measuring != 0:
-                step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
-                                   stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
     state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
     store_stats(stats, r, b, sample)
 
@@ -474,10 +487,19 @@ class LoneRoots:
         return self.function(self.table, *args[:3], rows, *args[4:])
 
 
-class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone", "score_alone"))):
-    """The compiled functions of one kernel (``make_kernel``); ``alone`` and ``score_alone``
-    are None for graphs with followers. numba compiles each on its first call: a run pays
-    only for the functions it uses."""
+class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone", "score_alone", "roots"))):
+    """The compiled functions of one kernel (``make_kernel``); ``alone``, ``score_alone`` and
+    ``roots`` are None for graphs with followers. numba compiles each on its first call: a
+    run pays only for the functions it uses."""
+
+    def integrator(self, sampled_data: bool, copies: int):
+        """The time loop for ``copies`` copies of this kernel's graph: ``alone`` for a few
+        copies of lone roots under continuous-time control, ``roots`` for more, else
+        ``integrate`` (graphs with followers, sampled-data control); all take
+        ``integrate``'s arguments."""
+        if self.roots is None or sampled_data:
+            return self.integrate
+        return self.alone if copies < ALONE_BELOW else self.roots
 
     def scorer(self, sampled_data: bool):
         """The function that scores trajectories computed elsewhere: ``score_alone`` for
@@ -496,7 +518,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
 
     * ``integrate(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds,
       order, parents, feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start,
-      k_stop, n_steps, stats, pair_stats, record, held, step_rate, held_given)``: the time loop;
+      k_stop, n_steps, stats, pair_stats, record, held, step_rate, held_given)``: the time loop
+      of graphs with followers, and of sampled-data control (a kernel of lone roots leaves
+      continuous-time control to ``roots`` and ``alone``: ``Kernel.integrator`` picks);
       with ``held_given`` a control instant keeps the commands already in ``held`` (the caller
       sets them, running one control period per call: the link step, ``nonholo.sim.linkstep``);
     * ``evaluate(state, fields, limits, ref_row, targets, target_row, offsets, kinds, order,
@@ -508,6 +532,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       of a trajectory computed elsewhere (the scipy cross-check, or the robots of a fleet run:
       states (N+1, 4, R, B), and with ``hold_every`` > 0 the commands each robot held,
       helds (N+1, HELD_COUNT, R, B)), by the same code;
+    * ``roots``: ``integrate`` (same arguments) for lone roots under continuous-time control,
+      ``ROOTS_CHUNK`` copies at a time through the whole time loop, each sample taken from the
+      first stage of the RK4 step that starts at it (no fifth law evaluation); None for
+      graphs with followers;
     * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
       time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies): the
       module's ``integrate_alone``, the same compiled code for every law (``LoneRoots``
@@ -676,8 +704,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         held[HELD_XI_DOT, r, b], h)
                     if measuring:
                         peak = max(peak, abs(omega))
-            elif kind == ROOT_A or kind == ROOT_B:
-                feeding = followers and feeds[r] != 0
+            elif followers and (kind == ROOT_A or kind == ROOT_B):   # (lone roots: ``roots``)
+                feeding = feeds[r] != 0
                 for b in range(n_batch):
                     if not (two_laws and kind == ROOT_B):
                         new, s1, s2, s3, s4 = root_rk4(
@@ -812,17 +840,108 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                             instant[field, r, b] = helds[k, field, r, b]
             accumulate(state, instant, ref[0], k, kinds, fields, d_max, stats, pair_stats, record, recording)
 
+    def roots_loop(law, gains, n, posture):
+        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned), under ``law``."""
+
+        @njit(**_OPTIONS)
+        def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
+                      n_steps, stats, record, step_rate, sample):
+            for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+                row = row_start[k]
+                last = k == n_steps
+                for j in range(1 if last else substeps[k]):
+                    peak = 0.0
+                    if last:   # the last sample's command is no RK4 stage: the law alone
+                        ref = row_values(rows, row)
+                        for b in range(c0, c1):
+                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                            v, omega, _, singular, sat_v, sat_w, _, _ = command(
+                                law, gains(*field_row(fields, r, b)[:n]), x, y, theta, xi, ref, limits[0, r, b],
+                                limits[1, r, b])
+                            keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                    else:
+                        h = dt / substeps[k]
+                        r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
+                            row_values(rows, row + 2 * j + 2)
+                        for b in range(c0, c1):
+                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                            new, s1, s2, s3, s4 = root_rk4(law, gains(*field_row(fields, r, b)[:n]), x, y, theta, xi,
+                                                           r0, r1, r2, h, limits[0, r, b], limits[1, r, b])
+                            state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = new
+                            # the first stage's command is the one in force at the step's start
+                            keep_sample(sample, b - c0, x, y, theta, xi, s1[5], s1[6], s1[7], s1[8], s1[9])
+                            if measuring:
+                                peak = max(peak, stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                           stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+                    if measuring:
+                        step_rate[k] = max(step_rate[k], peak)
+                    if j == 0:
+                        add_samples(sample, r, c0, c1, row_values(rows, row), k, posture, fields, stats, record,
+                                    step_rate)
+
+        return run_roots
+
+    @njit(inline="always", **_OPTIONS)
+    def keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w):
+        sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i] = x, y, theta, xi, v
+        sample[5, i], sample[6, i], sample[7, i], sample[8, i] = omega, singular, sat_v, sat_w
+
+    @njit(inline="always", **_OPTIONS)
+    def add_samples(sample, r, c0, c1, ref, k, posture, fields, stats, record, step_rate):
+        """Add the samples ``keep_sample`` kept at output step k to the statistics and record."""
+        t = ref[0]
+        for b in range(c0, c1):
+            i = b - c0
+            err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
+            store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), t, k, sample[4, i], sample[5, i],
+                                                 sample[6, i], sample[7, i], sample[8, i], err1, err2))
+        if record.shape[1] != 0:   # a loop of its own, as in ``accumulate``
+            for b in range(c0, c1):
+                i = b - c0
+                err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
+                store_record(record, k, r, b, record_row(
+                    sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i], sample[5, i], 0.0, 0.0, err1,
+                    err2, 0.0, 0.0, 0.0, sample[6, i], sample[7, i], sample[8, i]))
+        if measuring:
+            for i in range(c1 - c0):
+                step_rate[k] = max(step_rate[k], abs(sample[5, i]))
+
+    run_roots_a = roots_loop(law_a, gains_a, n_a, posture_a)
+    run_roots_b = roots_loop(law_b, gains_b, n_b, posture_b) if two_laws else run_roots_a
+
+    @njit(**_OPTIONS)
+    def roots(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
+              branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
+              record, held, step_rate, held_given):
+        n_batch = state.shape[2]
+        sample = np.empty((9, min(ROOTS_CHUNK, n_batch)))
+        for r in range(state.shape[1]):
+            for start in range(0, n_batch, ROOTS_CHUNK):
+                # unsigned copy indices: no negative-index wrap-around for LLVM to keep, which
+                # would stop it vectorizing the loop over them
+                c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
+                if two_laws and kinds[r] == ROOT_B:
+                    run_roots_b(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start,
+                                k_stop, n_steps, stats, record, step_rate, sample)
+                else:
+                    run_roots_a(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start,
+                                k_stop, n_steps, stats, record, step_rate, sample)
+
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
-        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)}
+        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score, roots)}
+    if not followers:
+        inner["run_roots_a"] = run_roots_a
+        if two_laws:
+            inner["run_roots_b"] = run_roots_b
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls
         stable_cache_identity(function)
     if followers:
-        return Kernel(integrate, evaluate, score, None, None)
-    roots = ((law_a, gains_a, posture_a), (law_b, gains_b, posture_b) if two_laws else None)
-    return Kernel(integrate, evaluate, score, LoneRoots(integrate_alone, roots), LoneRoots(score_alone, roots))
+        return Kernel(integrate, evaluate, score, None, None, None)
+    laws = ((law_a, gains_a, posture_a), (law_b, gains_b, posture_b) if two_laws else None)
+    return Kernel(integrate, evaluate, score, LoneRoots(integrate_alone, laws), LoneRoots(score_alone, laws), roots)

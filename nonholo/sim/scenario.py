@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from nonholo.control.registry import ControllerConfig, controller, follower_gains
 from nonholo.errors import FormationError, NonholoInputError
 from nonholo.models.formation_geometry import place_follower, pose_in_frame
+from nonholo.numerics import is_real
 from nonholo.references.base import Reference
 from nonholo.sim.links import LinkSettings
 from nonholo.sim.targets import target_segments
@@ -35,11 +36,6 @@ OUTPUTS = {SEPARATION_BEARING: ("l", "phi"), SEPARATION_SEPARATION: ("l1", "l2")
 CHANGE_MODES = ("step", "ramp")
 DIRECTIONS = ("shortest", "counterclockwise", "clockwise")
 PICONET_SLAVES = 7
-
-
-def is_real(value) -> bool:
-    """A finite real number (numpy scalars included, booleans not)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def is_count(value) -> bool:

@@ -151,27 +151,26 @@ class Group:
         self.offsets = np.zeros((2, n_robots, n_batch))
         self.d_max = np.zeros(n_batch)
         self.xi_speed = 0.0
-        vectors: dict[int, np.ndarray] = {}   # configs are usually shared by many robots
-        for b, (member, indices) in enumerate(copies):
-            for j, i in enumerate(indices):
-                robot = scenarios[member].robots[i]
-                self.state[:3, j, b] = poses[member][i]
-                self.limits[:, j, b] = robot.v_max, robot.omega_max
-                if isinstance(robot, Robot):
-                    config = robot.controller
+        vectors: dict[int, tuple] = {}   # configs are usually shared by many robots
+        for j, robot in enumerate(robots):   # one position of the graph in every copy at once
+            column = [scenarios[member].robots[indices[j]] for member, indices in copies]
+            self.state[:3, j] = np.array([poses[member][indices[j]] for member, indices in copies]).T
+            self.limits[:, j] = np.array([(r.v_max, r.omega_max) for r in column]).T
+            if isinstance(robot, Robot):
+                for r in column:
+                    config = r.controller
                     if id(config) not in vectors:
-                        vectors[id(config)] = config.gain_vector()
+                        vectors[id(config)] = (config.gain_vector(), initial_state(config, v_d0, r.name))
                         self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
-                    vector = vectors[id(config)]
-                    if robot.posture:
-                        vector = np.concatenate([robot.goal, vector])
-                    self.fields[:vector.size, j, b] = vector
-                    self.state[3, j, b] = initial_state(config, v_d0, robot.name)
-                else:
-                    self.fields[kn.K1, j, b], self.fields[kn.K2, j, b] = robot.k1, robot.k2
-                    self.fields[kn.OFFSET_D, j, b] = robot.d
-                    self.offsets[:, j, b] = np.subtract(robot.targets, robots[j].targets)
-                    self.d_max[b] = max(self.d_max[b], robot.d)
+                block = np.array([vectors[id(r.controller)][0] for r in column])
+                if robot.posture:   # a posture law's goal comes first
+                    block = np.hstack([np.array([r.goal for r in column], dtype=float), block])
+                self.fields[:block.shape[1], j] = block.T
+                self.state[3, j] = [vectors[id(r.controller)][1] for r in column]
+            else:
+                self.fields[[kn.K1, kn.K2, kn.OFFSET_D], j] = np.array([(r.k1, r.k2, r.d) for r in column]).T
+                self.offsets[:, j] = np.array([r.targets for r in column]).T - np.array(robot.targets)[:, None]
+                self.d_max = np.maximum(self.d_max, self.fields[kn.OFFSET_D, j])
         self.robots = robots
 
     def targets(self, times: np.ndarray) -> np.ndarray:
@@ -282,8 +281,9 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     by_key = defaultdict(list)
     known: dict = {}
     plans: dict[float, np.ndarray] = {}
-    for component in first.components():
-        robots = [first.robots[i] for i in component]
+
+    def describe(robots):
+        """A component's group key (laws, structure, plan) and its prior plan."""
         laws = tuple(dict.fromkeys((r.controller.law, r.controller.controller.gain_tuple)
                                    for r in robots if isinstance(r, Robot)))
         if len(laws) > 2:
@@ -295,8 +295,21 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
             plans[rate] = next((p for p in plans.values() if np.array_equal(p, plan)), plan)
         prior = plans[rate]
         local = {robot.name: j for j, robot in enumerate(robots)}   # (``Scenario.names`` is built per call)
-        shape = tuple(_structure(r, local) for r in robots)
-        by_key[laws, shape, id(prior)].append((component, prior))
+        return (laws, tuple(_structure(r, local) for r in robots), id(prior)), prior
+
+    lone: dict[tuple, tuple] = {}   # lone roots of one law, goal kind and prior rate describe alike
+    for component in first.components():
+        robots = [first.robots[i] for i in component]
+        if len(robots) == 1 and isinstance(robots[0], Robot):
+            config = robots[0].controller
+            key = (config.law, config.controller.gain_tuple, robots[0].posture,
+                   _prior_rate(robots, v_peak, omega_peak, known))
+            if key not in lone:
+                lone[key] = describe(robots)
+            group_key, prior = lone[key]
+        else:
+            group_key, prior = describe(robots)
+        by_key[group_key].append((component, prior))
     groups = []
     for (laws, _, _), entries in by_key.items():
         copies = [(member, component) for member in range(len(scenarios)) for component, _ in entries]
@@ -346,13 +359,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         if record and records is None:   # one group of every robot of every member: its record is the record
             records = g_record if _whole(group, n_robots, n_members) else \
                 np.empty((kn.REC_COUNT, n_steps + 1, n_robots, n_members))
-        for b, (member, indices) in enumerate(group.copies):
-            indices = list(indices)
-            stats[:, indices, member] = g_stats[:, :, b]
-            pair_stats[:, component_of[indices[0]], member] = g_pairs[:, b]
-            if record and records is not g_record:
-                records[:, :, indices, member] = g_record[:, :, :, b]
-            substeps[indices] = plan.max()
+        members = np.array([member for member, _ in group.copies])
+        index = np.array([indices for _, indices in group.copies])   # (copies, robots of the graph)
+        stats[:, index, members[:, None]] = np.moveaxis(g_stats, 1, 2)
+        pair_stats[:, [component_of[indices[0]] for _, indices in group.copies], members] = g_pairs
+        if record and records is not g_record:
+            records[:, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
+        substeps[index.ravel()] = plan.max()
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
     rows = None
@@ -483,8 +496,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     plan = group.prior
     iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
-    alone = kernel.alone is not None and scenario.hold_every == 0 and n_batch < kn.ALONE_BELOW
-    integrate = kernel.alone if alone else kernel.integrate
+    integrate = kernel.integrator(scenario.hold_every != 0, n_batch)
     for iteration in range(iterations):
         key = plan.tobytes()
         if key not in cache_:
