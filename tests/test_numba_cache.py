@@ -1,12 +1,25 @@
 """Compiled code is cached per user, never inside the installed package (issue: a leftover
 ``site-packages/nonholo/__pycache__`` hid a later editable install)."""
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def warm_cache(tmp_path) -> dict:
+    """An environment whose numba cache folder starts as a copy of this session's: the
+    package's own functions load from it, so a run compiles only the test's own law (what
+    these tests are about) instead of every kernel again."""
+    from nonholo.numba_cache import cache_dir
+
+    target = tmp_path / "numba"
+    if cache_dir().is_dir():
+        shutil.copytree(cache_dir(), target)
+    return {**os.environ, "NUMBA_CACHE_DIR": str(target)}
 
 PROBE = textwrap.dedent("""
     import sys
@@ -90,7 +103,7 @@ def test_a_removed_law_does_not_break_the_cache_of_the_others(tmp_path):
     user = tmp_path / "user"
     user.mkdir()
     (user / "gone_laws.py").write_text(LAW_MODULE)
-    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    environment = warm_cache(tmp_path)
     for law in ("gone-law", "kanayama"):
         if law == "kanayama":
             (user / "gone_laws.py").unlink()
@@ -118,7 +131,7 @@ def test_an_edited_law_is_compiled_again_not_served_from_the_cache(tmp_path):
     # them by position), must change the numbers, not load the old entry.
     user = tmp_path / "user"
     user.mkdir()
-    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    environment = warm_cache(tmp_path)
     source = LAW_MODULE.replace("gone", "edited").replace("gains.k * (1.0 + 0.0 * x)", "FACTOR * gains.k")
     source = source.replace('gains={"k": Gain(1.0, POSITIVE)}', 'gains={GAINS}')
     k, j = '"k": Gain(1.0, POSITIVE)', '"j": Gain(3.0, POSITIVE)'
