@@ -24,9 +24,10 @@ spread the range of the ratios of the same round.
 apart with the kernel's own compiled pieces run alone over the same batch — one law evaluation
 (``root_command``: sin/cos of θ, the law, the actuator limits), one RK4 step (``root_rk4``: four
 evaluations, the plant, the combination; the sample at t_k takes the first stage's command),
-the kernel's ``evaluate`` (a sample at t_k: its law evaluation, errors, stores) and ``score``
-(the sample and the running statistics), and a run of two steps (the Python set-up and
-result) — and the single run taken apart into the reference table, the recording and the rest.
+the batch kernel's own time loop (``Kernel.roots``: the RK4 steps and the samples, whose
+errors, running statistics and event counts are what it adds to them), and a run of two steps
+(the Python set-up and result) — and the single run taken apart into the reference table, the
+recording and the rest.
 """
 from __future__ import annotations
 
@@ -261,10 +262,9 @@ def _probe_rk4(law, gains, state, rows, h, n_steps):
 PROFILE_PARTS = (
     ("law", "law: 4 evaluations (the sample takes the first)"),
     ("plant_rk4", "plant and RK4 combination"),
-    ("sample", "the sample at t_k: errors, stored"),
-    ("statistics", "running statistics and event counts"),
+    ("sample", "the sample at t_k: errors, statistics, events"),
     ("setup", "set-up and result (Python, once per run)"),
-    ("rest", "the rest: loops, memory traffic"),
+    ("rest", "the rest: between kernel and simulator"),
     ("step", "whole step (the batch figure)"),
 )
 
@@ -283,27 +283,18 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
     state = np.array([[*r.start, rows[0, 8]] for r in batch.robots]).T.copy()
     sink = np.zeros(robots)
     kernel = kernel_for(((law, config.controller.gain_tuple),), False)
-    evaluate, score = kernel.evaluate, kernel.score
-    samples = rows[0:2 * n_steps + 1:2]
-    states = np.repeat(state[None, :, None, :], n_steps + 1, axis=0)   # (N + 1, 4, 1, B)
     fields = np.zeros((kn.MAX_FIELDS, 1, robots))
     fields[:len(gains)] = np.array(gains)[:, None, None]
-    limits = np.full((2, 1, robots), np.inf)
-    order, kinds = np.zeros(1, np.int64), np.full(1, kn.ROOT_A, np.int64)
-    parents = np.full((2, 1), -1, np.int64)
-    targets, offsets = np.zeros((1, 4, 1)), np.zeros((2, 1, robots))
-    instant = np.zeros((kn.INSTANT_COUNT, 1, robots))
-    no_record, helds = np.empty((kn.REC_COUNT, 0, 1, robots)), np.zeros((1, kn.HELD_COUNT, 1, robots))
+    graph = (np.full((2, 1, robots), np.inf), rows, 2 * np.arange(n_steps + 1), np.ones(n_steps, np.int64),
+             np.zeros((1, 4, 1)), np.zeros((2, 1, robots)), np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64),
+             np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, robots)), batch.sin_floor,
+             np.zeros(robots), 0.0, DT, 0)
 
-    def sample_all():
-        for k in range(n_steps + 1):
-            evaluate(states[k], fields, limits, tuple(samples[k]), targets, k, offsets, kinds, order, parents,
-                     np.zeros((1, robots)), batch.sin_floor, instant)
-
-    def score_all():
+    def kernel_alone():   # the batch's own time loop (``Kernel.roots``), without the simulator around it
         stats, pair_stats = kn.new_stats(1, robots)
-        score(states, fields, limits, samples, targets, offsets, kinds, order, parents, np.zeros((1, robots)),
-              batch.sin_floor, np.zeros(robots), stats, pair_stats, no_record, 0, helds)
+        kernel.roots(state[:, None, :].copy(), fields, *graph, 0, n_steps, n_steps, stats, pair_stats,
+                     np.empty((kn.REC_COUNT, 0, 1, robots)), np.zeros((kn.HELD_COUNT, 1, robots)),
+                     np.zeros(n_steps + 1), False)
 
     short = batch_scenario(robots, 2 * DT)   # two steps: the run's set-up and result alone
     say("the batch step's parts")
@@ -311,13 +302,11 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
         "setup": lambda: simulate(short, record=False),
         "command": lambda: _probe_commands(law, gains, state, rows, n_steps, sink),
         "rk4": lambda: _probe_rk4(law, gains, state.copy(), rows, DT, n_steps),
-        "evaluate": sample_all, "score": score_all,
-        "step": lambda: simulate(batch, record=False)}, rounds)
+        "kernel": kernel_alone, "step": lambda: simulate(batch, record=False)}, rounds)
     ns = {name: 1e9 * statistics.median(values) / (robots * n_steps) for name, values in times.items()}
     parts = {"law": 4.0 * ns["command"], "plant_rk4": ns["rk4"] - 4.0 * ns["command"],
-             "sample": ns["evaluate"] - ns["command"], "statistics": ns["score"] - ns["evaluate"],
-             "setup": ns["setup"], "step": ns["step"]}
-    parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "statistics", "setup"))
+             "sample": ns["kernel"] - ns["rk4"], "setup": ns["setup"], "step": ns["step"]}
+    parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "setup"))
     say("the single run's parts")
     single = single_scenario()
     table_times = np.arange(2 * single.n_steps + 1) * (DT / 2)
