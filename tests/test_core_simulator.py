@@ -1,11 +1,13 @@
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from nonholo import references
+from nonholo import examples, references
 from nonholo.control.registry import controller
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
+from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
 from nonholo.sim.simulator import simulate
 
@@ -115,3 +117,37 @@ def test_a_large_batch_is_set_up_without_rebuilding_the_robot_list_per_robot(mon
     robots = [Robot(f"r{i}", controller("kanayama"), (0.01 * i, 0.0, 0.0)) for i in range(2000)]
     run = simulate(Scenario(references.circle(), robots, duration=0.05, dt=0.01), record=False)
     assert run.stats.shape[1] == 2000 and len(calls) < 50
+
+
+def _copies(scenario: Scenario, n: int) -> list[Scenario]:
+    return [dataclasses.replace(scenario, robots=tuple(
+        dataclasses.replace(r, start=(r.start[0] + 0.2 * i, r.start[1], r.start[2])) if isinstance(r, Robot) else r
+        for r in scenario.robots)) for i in range(n)]
+
+
+def _progress_cases():
+    eight = Scenario(references.eight(), [Robot("r", controller("dynamic-feedback"), (0.5, -0.5, 0.3))], duration=4.0,
+                     dt=0.01)
+    chain = load_scenario(examples.resolve("formation-chain"))
+    chain = dataclasses.replace(chain, duration=1.0)
+    return {
+        "alone": [eight],                                                 # Kernel.alone
+        "roots": _copies(eight, 9),                                       # Kernel.roots
+        "roots-substeps": _copies(dataclasses.replace(eight, substeps=3), 9),
+        "posture": _copies(Scenario(None, [Robot("p", controller("polar"), (-1.0, -1.0, 0.5), goal=(0.0, 0.0, 0.0))],
+                                    duration=4.0, dt=0.02), 5),           # measured turn rates
+        "sampled": _copies(dataclasses.replace(eight, control_period=0.05), 5),   # Kernel.integrate
+        "formation": [chain],                                             # Kernel.integrate with followers
+    }
+
+
+@pytest.mark.parametrize("case", ["alone", "roots", "roots-substeps", "posture", "sampled", "formation"])
+def test_a_run_shown_with_progress_equals_one_run_without(case):
+    # a progress bar runs the kernel in 50 resumed pieces (k_start, k_stop): every kernel
+    # must give the same numbers as in one call
+    members = _progress_cases()[case]
+    whole = simulate(members, progress=False)
+    pieces = simulate(members, progress=True)
+    assert np.array_equal(whole.stats, pieces.stats, equal_nan=True)
+    assert np.array_equal(whole.record, pieces.record, equal_nan=True)
+    assert np.array_equal(whole.substeps, pieces.substeps)
