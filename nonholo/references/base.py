@@ -6,7 +6,6 @@ import numbers
 from abc import ABC, abstractmethod
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from nonholo.errors import InfeasibleReferenceError, ScenarioError
 from nonholo.references.feedforward import feedforward
@@ -77,6 +76,8 @@ class Reference(ABC):
         peak is refined with a bounded scalar minimization, so that zeros between grid
         points (cusps, rest points) are found too.
         """
+        from scipy.optimize import minimize_scalar   # here: scipy.optimize costs every command 0.2 s to import
+
         t = np.linspace(t0, t1, samples)
         speed = self.speed(t)
         scale = max(1.0, float(speed.max()))

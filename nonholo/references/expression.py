@@ -21,7 +21,6 @@ from collections.abc import Mapping
 
 import numpy as np
 import sympy as sp
-from scipy.optimize import brentq
 
 from nonholo.errors import ExpressionError, InfeasibleReferenceError, ScenarioError
 from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number,
@@ -126,6 +125,8 @@ class ExpressionReference(Reference):
             with np.errstate(all="ignore"):
                 values = np.broadcast_to(np.asarray(compiled(times), dtype=complex), times.shape)
             return np.where(np.abs(values.imag) < 1e-12, values.real, np.nan)
+
+        from scipy.optimize import brentq   # here: scipy.optimize costs every command 0.2 s to import
 
         grid = np.linspace(0.0, horizon, 10_001)
         values = evaluate(grid)

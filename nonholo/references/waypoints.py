@@ -11,7 +11,6 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from nonholo.errors import InfeasibleReferenceError, ScenarioError
 from nonholo.references.base import FORWARD, Reference
@@ -49,6 +48,8 @@ class WaypointReference(Reference):
         super().__init__(direction, float(points[-1, 0]))
         self.points = points
         self.boundary = boundary
+        from scipy.interpolate import CubicSpline   # here: scipy costs every command 0.3 s to import
+
         try:
             with np.errstate(all="ignore"):  # an overflow is reported below
                 self._spline = CubicSpline(points[:, 0], points[:, 1:], bc_type=boundary, extrapolate=False)

@@ -27,7 +27,6 @@ from collections.abc import Sequence
 from functools import cache
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from nonholo.control.registry import initial_state
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError, SimulationError
@@ -569,6 +568,7 @@ def _check_diverged(group: Group, stats: np.ndarray) -> None:
 def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bool, grid: np.ndarray):
     """scipy cross-check: DOP853 (Radau for stiff laws), rtol = atol = 1e-10, dense output
     sampled on the grid and scored by the same compiled code as the RK4 path."""
+    from scipy.integrate import solve_ivp   # here: importing scipy.integrate costs every command 0.3 s
     shape = group.state.shape
     n_robots, n_batch = shape[1:]
     instant = np.zeros((kn.INSTANT_COUNT, n_robots, n_batch))
