@@ -55,7 +55,8 @@ def _pose(value, robot: str, name: str) -> tuple[float, float, float]:
 def _limits(robot) -> None:
     for limit in ("v_max", "omega_max"):
         value = getattr(robot, limit)
-        if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and value > 0):
+        number = type(value) is float or (isinstance(value, numbers.Real) and not isinstance(value, bool))
+        if not (number and value > 0):   # (inf: no limit)
             raise FormationError(robot.name, limit, f"must be a number > 0, got {value!r}")
         object.__setattr__(robot, limit, float(value))
 
