@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from nonholo import references
 from nonholo.errors import InfeasibleReferenceError

@@ -68,22 +68,47 @@ def test_several_lone_roots_of_two_laws_alone():
     assert_same(one, many)
 
 
-def test_batches_past_one_chunk_integrate_every_copy_alike():
+@pytest.mark.parametrize("name, substeps", [("kanayama", None), ("dynamic-feedback", 2), ("polar", None)])
+def test_batches_past_one_chunk_integrate_every_copy_alike(name, substeps):
     # ``roots`` runs ROOTS_CHUNK copies at a time: copies in the second, partial chunk and on
-    # both sides of the boundary follow the same trajectories as one copy alone
-    robot = Robot("r", controller("kanayama"), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
-    scenario = Scenario(references.eight(), [robot], duration=3.0, dt=0.01)
+    # both sides of the boundary follow the same trajectories as one copy alone (sub-steps
+    # fixed, and a posture law's measured ones)
+    posture = name == "polar"
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6,
+                  goal=(0.0, 0.0, 0.0) if posture else None)
+    scenario = Scenario(None if posture else references.eight(), [robot], duration=3.0, dt=0.01, substeps=substeps)
     copies = kn.ROOTS_CHUNK + 5
     members = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(2.0 + 0.01 * i, -1.5, 0.3)),))
                for i in range(copies)]
     many = simulate(members)
     rows = list(range(kn.ROBOT_STATS))
     for i in (0, kn.ROOTS_CHUNK - 1, kn.ROOTS_CHUNK, copies - 1):
-        one = simulate(members[i])
-        assert np.allclose(one.stats[rows, 0, 0], many.stats[rows, 0, i], rtol=1e-12, atol=1e-12)
-        assert np.allclose(one.record[..., 0], many.record[..., i], rtol=1e-12, atol=1e-10)
+        if not posture:   # (a posture batch plans its sub-steps for all copies at once)
+            one = simulate(members[i])
+            assert np.allclose(one.stats[rows, 0, 0], many.stats[rows, 0, i], rtol=1e-12, atol=1e-12)
+            assert np.allclose(one.record[..., 0], many.record[..., i], rtol=1e-12, atol=1e-10)
+        # the statistics taken from each step's first RK4 stage equal the batch scoring code's,
+        # which evaluates the law once more at every recorded state
+        scored = score_both(members[i], many.record[:, :, :, i:i + 1])[1][0]
+        assert np.allclose(scored[rows, 0, 0], many.stats[rows, 0, i], rtol=1e-12, atol=1e-12)
     # and the copies differ (a chunk that ran one copy's state for another would not)
     assert not np.allclose(many.record[kn.REC_X, -1, 0, 0], many.record[kn.REC_X, -1, 0, copies - 1])
+
+
+def test_integrate_refuses_what_it_leaves_to_roots_and_alone():
+    # (dynamic feedback: the sampled-data tests compile its ``integrate`` anyway)
+    robot = Robot("r", controller("dynamic-feedback"), (0.2, 0.1, 0.0))
+    kernel = kernel_for(((robot.controller.law, robot.controller.controller.gain_tuple),), False)
+    assert kernel.integrator(False, kn.ALONE_BELOW) is kernel.roots
+    assert kernel.integrator(False, 1) is kernel.alone and kernel.integrator(True, 100) is kernel.integrate
+    state = np.zeros((4, 1, 1))
+    with pytest.raises(ValueError, match="Kernel.roots or Kernel.alone"):
+        kernel.integrate(state, np.zeros((kn.MAX_FIELDS, 1, 1)), np.full((2, 1, 1), np.inf), np.zeros((3, 10)),
+                         np.zeros(2, np.int64), np.ones(1, np.int64), np.zeros((1, 4, 1)), np.zeros((2, 1, 1)),
+                         np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64), np.full((2, 1), -1, np.int64),
+                         np.zeros(1, np.int64), np.zeros((1, 1)), 0.0, np.zeros(1), 0.0, 0.01, 0, 0, 1, 1,
+                         *kn.new_stats(1, 1), np.empty((kn.REC_COUNT, 0, 1, 1)), np.zeros((kn.HELD_COUNT, 1, 1)),
+                         np.zeros(2), False)
 
 
 def score_both(scenario: Scenario, record: np.ndarray):

@@ -780,6 +780,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                   branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
                   record, held, step_rate, held_given):
         sampled_data = hold_every != 0
+        if not followers and not sampled_data:   # not compiled here: ``Kernel.integrator`` picks
+            raise ValueError("lone roots under continuous-time control run in Kernel.roots or Kernel.alone")
         recording = record.shape[1] != 0
         n_robots, n_batch = state.shape[1], state.shape[2]
         instant = np.zeros((INSTANT_COUNT, n_robots, n_batch))
