@@ -96,6 +96,7 @@ ALONE_BELOW = 4
 # Batches of lone roots under continuous-time control run this many copies at a time through
 # the whole time loop (``Kernel.roots``): their state and statistics stay in the core's caches.
 ROOTS_CHUNK = 256
+KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
@@ -885,6 +886,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
 
     @njit(inline="always", **_OPTIONS)
     def keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w):
+        """Keep copy i's sample at t_k in column i of ``sample`` (``KEPT_COUNT`` rows, in
+        this argument order) until ``add_samples`` adds it to the statistics."""
         sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i] = x, y, theta, xi, v
         sample[5, i], sample[6, i], sample[7, i], sample[8, i] = omega, singular, sat_v, sat_w
 
@@ -916,7 +919,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
               branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
               record, held, step_rate, held_given):
         n_batch = state.shape[2]
-        sample = np.empty((9, min(ROOTS_CHUNK, n_batch)))
+        sample = np.empty((KEPT_COUNT, min(ROOTS_CHUNK, n_batch)))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
                 # unsigned copy indices: no negative-index wrap-around for LLVM to keep, which
