@@ -21,10 +21,13 @@ from numba import njit
 def is_real(value) -> bool:
     """A finite real number (numpy scalars included, booleans not); Python floats and ints
     are checked without the slower abstract-base-class test (sweeps check 10⁴ gain sets)."""
-    kind = type(value)
-    if kind is float or kind is int:
-        return math.isfinite(value)
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    try:   # (an int past the float range raises OverflowError in isfinite: not a finite real for us)
+        kind = type(value)
+        if kind is float or kind is int:
+            return math.isfinite(value)
+        return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 _TWO_OVER_PI = 0.63661977236758134308

@@ -503,3 +503,17 @@ def test_a_closed_pipe_ends_quietly():
     finally:
         os.close(write_end)
     assert (proc.returncode, proc.stderr) == (141, "")
+
+
+def test_integers_past_the_float_range_are_refused_in_one_short_line():
+    # math.isfinite(10**400) raises OverflowError: the gain and pose checks say "not finite"
+    from nonholo import Robot
+    from nonholo.control.registry import controller
+    from nonholo.errors import NonholoInputError
+
+    with pytest.raises(NonholoInputError, match="must be a finite number") as info:
+        controller("kanayama", kx=10**400)
+    assert len(str(info.value)) < 200
+    with pytest.raises(NonholoInputError, match="three finite numbers") as info:
+        Robot("r", start=(10**400, 0.0, 0.0))
+    assert len(str(info.value)) <= 300

@@ -37,6 +37,7 @@ import numpy as np
 
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.numerics import is_real
+from nonholo.tomlfile import describe_value
 
 LAW_PARAMETERS = ("x", "y", "theta", "cos_theta", "sin_theta", "xi", "ref", "gains")
 GOAL_FIELDS = ("goal_x", "goal_y", "goal_theta")
@@ -91,7 +92,8 @@ def check_gains(owner: str, values: Mapping, accepted: tuple[str, ...], defaults
         if name not in accepted:
             raise NonholoInputError(f"unknown gain {name!r} for {owner} (gains: {', '.join(accepted)})")
         if not is_real(value):
-            raise NonholoInputError(f"gain {name!r} of {owner} must be a finite number, got {value!r}")
+            raise NonholoInputError(f"gain {name!r} of {owner} must be a finite number, got "
+                                    f"{describe_value(value, typed=False)}")
     for alias, targets in aliases.items():
         if alias in values:
             clash = [t for t in targets if t in values]
