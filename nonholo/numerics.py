@@ -17,7 +17,6 @@ import numpy as np
 from numba import njit
 
 
-
 def is_real(value) -> bool:
     """A finite real number (numpy scalars included, booleans not); Python floats and ints
     are checked without the slower abstract-base-class test (sweeps check 10⁴ gain sets)."""

@@ -101,6 +101,10 @@ def test_integrate_refuses_what_it_leaves_to_roots_and_alone():
     kernel = kernel_for(((robot.controller.law, robot.controller.controller.gain_tuple),), False)
     assert kernel.integrator(False, kn.ALONE_BELOW) is kernel.roots
     assert kernel.integrator(False, 1) is kernel.alone and kernel.integrator(True, 100) is kernel.integrate
+    other = controller("kanayama")
+    with pytest.raises(ValueError, match="runs one law"):   # lone roots are grouped by law
+        kn.make_kernel(robot.controller.law, robot.controller.controller.gain_tuple, other.law,
+                       other.controller.gain_tuple, False)
     state = np.zeros((4, 1, 1))
     with pytest.raises(ValueError, match="Kernel.roots or Kernel.alone"):
         kernel.integrate(state, np.zeros((kn.MAX_FIELDS, 1, 1)), np.full((2, 1, 1), np.inf), np.zeros((3, 10)),

@@ -267,8 +267,8 @@ def _make_root_rk4(command, fastmath):
         sixth = h / 6.0
         return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
                  rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
-                (x, y, theta, xi, e1, v1, w1, singular, sat_v, sat_w), (x2, y2, t2, xi2, e2, v2, w2), (x3, y3, t3, xi3, e3, v3, w3),
-                (x4, y4, t4, xi4, e4, v4, w4))
+                (x, y, theta, xi, e1, v1, w1, singular, sat_v, sat_w), (x2, y2, t2, xi2, e2, v2, w2),
+                (x3, y3, t3, xi3, e3, v3, w3), (x4, y4, t4, xi4, e4, v4, w4))
 
     return njit(error_model="numpy", fastmath=fastmath)(root_rk4)
 
@@ -367,15 +367,6 @@ def root_errors(posture, fields, r, b, x, y, theta, ref):
     return goal_errors(ref[REF_X], ref[REF_Y], ref[REF_THETA], x, y, theta)
 
 
-@njit(inline="always", **_OPTIONS)
-def lone_root(roots, kinds, r):
-    """``run_alone``'s ``root`` for robot r: its law's (entry address, posture) from the
-    (2, 2) table ``roots`` (row 0: ROOT_A, row 1: ROOT_B), and whether to measure turn rates
-    (for every robot if either law is a posture law, as ``integrate`` does)."""
-    row = 1 if kinds[r] == ROOT_B else 0
-    return roots[row, 0], roots[row, 1], roots[0, 1] | roots[1, 1]
-
-
 @njit(**_OPTIONS)
 def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps,
               stats, record, step_rate, given):
@@ -431,61 +422,54 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
 
 
 @njit(**_OPTIONS)
-def integrate_alone(roots, state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents,
+def integrate_alone(root, state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents,
                     feeds, branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats,
                     pair_stats, record, held, step_rate, held_given):
-    """``integrate`` (same arguments after ``roots``) for lone roots under continuous-time
+    """``integrate`` (same arguments after ``root``) for lone roots under continuous-time
     control, one robot at a time (``run_alone``): the faster for a few copies
-    (``ALONE_BELOW``). ``roots`` (2, 2) int64: (entry address, posture) of the laws of
-    ``ROOT_A`` and ``ROOT_B`` robots (``Kernel.alone`` binds it, ``lone_root``)."""
+    (``ALONE_BELOW``). ``root`` (2,) int64: the law's (entry address, posture) (``LoneRoot``
+    binds it); a posture law's turn rates are measured."""
     no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
+    law = (root[0], root[1], root[1])
     for r in range(state.shape[1]):
-        root = lone_root(roots, kinds, r)
         for b in range(state.shape[2]):
-            run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
+            run_alone(law, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
                       n_steps, stats, record, step_rate, no_states)
 
 
 @njit(**_OPTIONS)
-def score_alone(roots, states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max,
+def score_alone(root, states, fields, limits, rows, targets, offsets, kinds, order, parents, branch, sin_floor, d_max,
                 stats, pair_stats, record, hold_every, helds):
-    """``score`` (same arguments after ``roots``, see ``integrate_alone``) for lone roots
+    """``score`` (same arguments after ``root``, see ``integrate_alone``) for lone roots
     under continuous-time control (``hold_every`` 0): ``run_alone`` over the given states,
     with no sub-steps."""
     n_steps = states.shape[0] - 1
     state = states[0].copy()
     row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
     k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
+    law = (root[0], root[1], root[1])
     for r in range(state.shape[1]):
-        root = lone_root(roots, kinds, r)
         for b in range(state.shape[2]):
-            run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
+            run_alone(law, r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
                       n_steps, stats, record, step_rate, states)
 
 
-class LoneRoots:
-    """``integrate_alone`` or ``score_alone`` for the roots of one kernel: ``roots`` is
-    ((law, gain class, posture) of ROOT_A, that of ROOT_B or None). Their entries
-    (``nonholo.sim.lawcall.law_entry``) are made on the first call, so runs that never use
-    this function never compile them."""
+class LoneRoot:
+    """``integrate_alone`` or ``score_alone`` bound to the law of a kernel of lone roots:
+    ``law`` is (law, gain class, posture). Its entry (``nonholo.sim.lawcall.law_entry``) is
+    made on the first call, so runs that never use this function never compile it."""
 
-    def __init__(self, function, roots):
-        self.function, self.roots, self.table = function, roots, None
+    def __init__(self, function, law):
+        self.function, self.law, self.root = function, law, None
 
     def __call__(self, *args):
-        if self.table is None:   # set only once complete: a law that fails to compile leaves None
-            table = np.zeros((2, 2), dtype=np.int64)
-            for i, root in enumerate(self.roots):
-                if root is not None:
-                    law, gains, posture = root
-                    table[i] = law_entry(law, gains).address, posture
-            if self.roots[1] is None:
-                table[1] = table[0]   # a one-law kernel: ROOT_B robots run law A, as in ``integrate``
-            self.table = table
+        if self.root is None:   # set only once made: a law that fails to compile leaves None
+            law, gains, posture = self.law
+            self.root = np.array([law_entry(law, gains).address, posture], dtype=np.int64)
         rows = np.ascontiguousarray(args[3], dtype=np.float64)   # the law reads reference rows by address
         if rows.ndim != 2 or rows.shape[1] != REF_SIZE:
             raise ValueError(f"reference rows must be (rows, {REF_SIZE}), got {rows.shape}")
-        return self.function(self.table, *args[:3], rows, *args[4:])
+        return self.function(self.root, *args[:3], rows, *args[4:])
 
 
 class Kernel(namedtuple("Kernel", ("integrate", "evaluate", "score", "alone", "score_alone", "roots"))):
@@ -513,7 +497,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     """Compile (once, cached on disk) the functions that simulate a robot graph whose roots
     run ``law_a`` or ``law_b`` (namedtuple classes ``gains_a``, ``gains_b`` of their fields)
     and which has followers if ``followers`` (a compile-time choice: graphs of lone roots
-    compile no formation code).
+    compile no formation code). A kernel without followers runs one law (``law_b`` is
+    ``idle_law``): each lone root is a graph of its own, grouped with those of its law.
 
     Returns a ``Kernel`` (integrate, evaluate, score, alone):
 
@@ -539,8 +524,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       graphs with followers;
     * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
       time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies): the
-      module's ``integrate_alone``, the same compiled code for every law (``LoneRoots``
-      binds these laws' entries); None for graphs with followers;
+      module's ``integrate_alone``, the same compiled code for every law (``LoneRoot``
+      binds the law's entry); None for graphs with followers;
     * ``score_alone``: ``score`` (same arguments) for lone roots under continuous-time
       control, one robot at a time through ``alone``'s code; None for graphs with followers
       (``Kernel.scorer`` picks).
@@ -548,6 +533,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     Only these closures capture the laws: numba caches closures over module-level
     functions across processes, not closures over other closures.
     """
+    if law_b is not idle_law and not followers:   # (simulate groups lone roots by law)
+        raise ValueError("a kernel of lone roots runs one law: two laws need a graph with followers")
     stable_cache_identity(law_a)
     stable_cache_identity(law_b)
     # Graphs with followers keep every operation as written (no FMA contraction): their cost
@@ -843,47 +830,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                             instant[field, r, b] = helds[k, field, r, b]
             accumulate(state, instant, ref[0], k, kinds, fields, d_max, stats, pair_stats, record, recording)
 
-    def roots_loop(law, gains, n, posture):
-        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned), under ``law``."""
-
-        @njit(**_OPTIONS)
-        def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                      n_steps, stats, record, step_rate, sample):
-            for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
-                row = row_start[k]
-                last = k == n_steps
-                for j in range(1 if last else substeps[k]):
-                    peak = 0.0
-                    if last:   # the last sample's command is no RK4 stage: the law alone
-                        ref = row_values(rows, row)
-                        for b in range(c0, c1):
-                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                            v, omega, _, singular, sat_v, sat_w, _, _ = command(
-                                law, gains(*field_row(fields, r, b)[:n]), x, y, theta, xi, ref, limits[0, r, b],
-                                limits[1, r, b])
-                            keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                    else:
-                        h = dt / substeps[k]
-                        r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
-                            row_values(rows, row + 2 * j + 2)
-                        for b in range(c0, c1):
-                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                            new, s1, s2, s3, s4 = root_rk4(law, gains(*field_row(fields, r, b)[:n]), x, y, theta, xi,
-                                                           r0, r1, r2, h, limits[0, r, b], limits[1, r, b])
-                            state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = new
-                            # the first stage's command is the one in force at the step's start
-                            keep_sample(sample, b - c0, x, y, theta, xi, s1[5], s1[6], s1[7], s1[8], s1[9])
-                            if measuring:
-                                peak = max(peak, stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
-                                           stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
-                    if measuring:
-                        step_rate[k] = max(step_rate[k], peak)
-                    if j == 0:
-                        add_samples(sample, r, c0, c1, row_values(rows, row), k, posture, fields, stats, record,
-                                    step_rate)
-
-        return run_roots
-
     @njit(inline="always", **_OPTIONS)
     def keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w):
         """Keep copy i's sample at t_k in column i of ``sample`` (``KEPT_COUNT`` rows, in
@@ -911,8 +857,42 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             for i in range(c1 - c0):
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))
 
-    run_roots_a = roots_loop(law_a, gains_a, n_a, posture_a)
-    run_roots_b = roots_loop(law_b, gains_b, n_b, posture_b) if two_laws else run_roots_a
+    @njit(**_OPTIONS)
+    def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
+                  n_steps, stats, record, step_rate, sample):
+        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned)."""
+        for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+            row = row_start[k]
+            last = k == n_steps
+            for j in range(1 if last else substeps[k]):
+                peak = 0.0
+                if last:   # the last sample's command is no RK4 stage: the law alone
+                    ref = row_values(rows, row)
+                    for b in range(c0, c1):
+                        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        v, omega, _, singular, sat_v, sat_w, _, _ = command(
+                            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, limits[0, r, b],
+                            limits[1, r, b])
+                        keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                else:
+                    h = dt / substeps[k]
+                    r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
+                        row_values(rows, row + 2 * j + 2)
+                    for b in range(c0, c1):
+                        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        new, s1, s2, s3, s4 = root_rk4(law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta,
+                                                       xi, r0, r1, r2, h, limits[0, r, b], limits[1, r, b])
+                        state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = new
+                        # the first stage's command is the one in force at the step's start
+                        keep_sample(sample, b - c0, x, y, theta, xi, s1[5], s1[6], s1[7], s1[8], s1[9])
+                        if measuring:
+                            peak = max(peak, stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
+                                       stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+                if measuring:
+                    step_rate[k] = max(step_rate[k], peak)
+                if j == 0:
+                    add_samples(sample, r, c0, c1, row_values(rows, row), k, posture_a, fields, stats, record,
+                                step_rate)
 
     @njit(**_OPTIONS)
     def roots(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
@@ -925,28 +905,21 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 # unsigned copy indices: no negative-index wrap-around for LLVM to keep, which
                 # would stop it vectorizing the loop over them
                 c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
-                if two_laws and kinds[r] == ROOT_B:
-                    run_roots_b(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start,
-                                k_stop, n_steps, stats, record, step_rate, sample)
-                else:
-                    run_roots_a(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start,
-                                k_stop, n_steps, stats, record, step_rate, sample)
+                run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
+                          n_steps, stats, record, step_rate, sample)
 
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
-        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score, roots)}
-    if not followers:
-        inner["run_roots_a"] = run_roots_a
-        if two_laws:
-            inner["run_roots_b"] = run_roots_b
+        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
+        + ((run_roots, roots) if not followers else ())}
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls
         stable_cache_identity(function)
     if followers:
         return Kernel(integrate, evaluate, score, None, None, None)
-    laws = ((law_a, gains_a, posture_a), (law_b, gains_b, posture_b) if two_laws else None)
-    return Kernel(integrate, evaluate, score, LoneRoots(integrate_alone, laws), LoneRoots(score_alone, laws), roots)
+    law = (law_a, gains_a, posture_a)
+    return Kernel(integrate, evaluate, score, LoneRoot(integrate_alone, law), LoneRoot(score_alone, law), roots)
