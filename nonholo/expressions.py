@@ -91,7 +91,7 @@ _ALLOWED = "use numbers, names, + - * / ^ and functions"
 _NON_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 _ADD, _MUL = (ast.Add, ast.Sub), (ast.Mult, ast.Div)
 _SHOWN = 60  # characters of a formula quoted in a message
-_BUDGET = threading.local()  # .active: a symbolic budget runs in this thread
+_BUDGET = threading.local()  # .active: a symbolic budget runs in this thread; .counter: its tracer
 
 
 def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None = None) -> sp.Expr:
@@ -148,30 +148,75 @@ def symbolic_budget(where: str):
     portable (no signal, no thread, no process) and deterministic: a formula is accepted or
     refused alike on every machine and under any load. It slows the bounded work about
     2.5 times; any other tracer (a debugger, coverage) keeps being called.
+
+    Python drops a trace function that raises. When the step that crosses the budget runs
+    in a finalizer (a generator closed by the garbage collector, whose exceptions Python
+    only reports as unraisable), the counter is put back from ``sys.unraisablehook``, so
+    the next call raises where it cannot be swallowed. Should sympy itself swallow the
+    exception, the block is refused when it ends all the same.
     """
     if getattr(_BUDGET, "active", False):
         yield
         return
-    previous, steps = sys.gettrace(), 0
+    previous, steps, over = sys.gettrace(), 0, False
     limit = MAX_SYMBOLIC_STEPS
 
     def count(frame, event, arg):
-        nonlocal steps
+        nonlocal steps, over
         steps += 1
         if steps > limit:
+            over = True
             raise _OverBudget
         return previous(frame, event, arg) if previous is not None else None
 
-    _BUDGET.active = True
+    refused = ExpressionError(f"{where}: symbolic work beyond its budget of {limit:,} steps "
+                              "(write a simpler formula)")
+    _BUDGET.active, _BUDGET.counter = True, count
+    _watch_finalizers(True)
     sys.settrace(count)
     try:
         yield
     except _OverBudget:
-        raise ExpressionError(f"{where}: symbolic work beyond its budget of {limit:,} steps "
-                              "(write a simpler formula)") from None
+        raise refused from None
     finally:
         sys.settrace(previous)
-        _BUDGET.active = False
+        _BUDGET.active, _BUDGET.counter = False, None
+        _watch_finalizers(False)
+    if over:
+        raise refused
+
+
+_HOOK = threading.Lock()
+_HOOK_USERS = 0  # budgets running in any thread
+_HOOK_PREVIOUS = None  # sys.unraisablehook before the first of them
+
+
+def _watch_finalizers(start: bool) -> None:
+    """Install ``_unraisable`` while any budget runs (``start``), else restore the hook it
+    replaced (unless someone replaced it meanwhile)."""
+    global _HOOK_USERS, _HOOK_PREVIOUS
+    with _HOOK:
+        if start:
+            if _HOOK_USERS == 0:
+                _HOOK_PREVIOUS, sys.unraisablehook = sys.unraisablehook, _unraisable
+            _HOOK_USERS += 1
+        else:
+            _HOOK_USERS -= 1
+            if _HOOK_USERS == 0:
+                if sys.unraisablehook is _unraisable:
+                    sys.unraisablehook = _HOOK_PREVIOUS
+                _HOOK_PREVIOUS = None
+
+
+def _unraisable(info) -> None:
+    """``sys.unraisablehook`` while a budget runs: the budget's ``_OverBudget`` raised in a
+    finalizer puts its counter back (Python dropped it); anything else goes to the hook
+    that was there before."""
+    counter = getattr(_BUDGET, "counter", None)
+    if counter is not None and isinstance(info.exc_value, _OverBudget):
+        sys.settrace(counter)
+        return
+    (_HOOK_PREVIOUS or sys.__unraisablehook__)(info)
 
 
 @contextmanager

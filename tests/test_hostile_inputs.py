@@ -173,6 +173,54 @@ def test_symbolic_work_beyond_the_budget_is_one_line(monkeypatch):
     assert sys.gettrace() is None or "coverage" in type(sys.gettrace()).__module__
 
 
+def test_the_budget_holds_when_it_runs_out_in_a_finalizer(monkeypatch):
+    """Found in CI: the step that crosses the budget ran while the garbage collector closed
+    one of sympy's generators. Python swallows an exception there and drops the trace
+    function, and the work went on unbounded and was accepted. Here a generator is closed
+    while its cleanup makes the calls that cross the budget."""
+    monkeypatch.setattr(nonholo.expressions, "MAX_SYMBOLIC_STEPS", 100)
+    calls_after = []
+
+    def step():
+        return None
+
+    def cleaning_up():
+        try:
+            yield
+        finally:
+            for _ in range(1_000):  # crosses the budget here, where Python cannot raise
+                step()
+
+    previous_hook = sys.unraisablehook
+    with pytest.raises(ExpressionError, match="beyond its budget of 100 steps"):
+        with nonholo.expressions.symbolic_budget("x"):
+            generator = cleaning_up()
+            next(generator)
+            del generator  # closed now: its exception is reported as unraisable, not raised
+            for _ in range(1_000):
+                calls_after.append(step())
+    assert len(calls_after) == 0  # the very next call raised: the counter was back in place
+    assert sys.unraisablehook is previous_hook
+    assert sys.gettrace() is None or "coverage" in type(sys.gettrace()).__module__
+
+
+def test_a_budget_swallowed_inside_the_work_still_refuses(monkeypatch):
+    """Should the bounded work catch the budget's exception itself (a bare ``except:``),
+    the block is refused when it ends."""
+    monkeypatch.setattr(nonholo.expressions, "MAX_SYMBOLIC_STEPS", 10)
+
+    def step():
+        return None
+
+    with pytest.raises(ExpressionError, match="beyond its budget of 10 steps"):
+        with nonholo.expressions.symbolic_budget("x"):
+            try:
+                for _ in range(100):
+                    step()
+            except BaseException:  # noqa: BLE001 - what a careless library might do
+                pass
+
+
 def test_a_failure_of_sympy_itself_is_one_line():
     """Found by fuzzing: sympy 1.14 raises a bare ValueError while simplifying this (a bug
     in its factorisation); should sympy learn it, the reference must simply work."""
