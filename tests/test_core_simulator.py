@@ -9,7 +9,7 @@ from nonholo.control.registry import controller
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
-from nonholo.sim.simulator import simulate
+from nonholo.sim.simulator import simulate, stage_times
 
 
 def test_rk4_agrees_with_solve_ivp():
@@ -65,6 +65,21 @@ def test_sampled_data_control_holds_the_command():
     assert held.metrics.error_final[0] < 5e-3 and held.metrics.error_mean[0] != continuous.metrics.error_mean[0]
     with pytest.raises(NonholoInputError, match="multiple of dt"):
         Scenario(references.eight(), [robot], dt=0.01, control_period=0.015)
+
+
+@pytest.mark.parametrize("substeps", [None, 1, 3])
+def test_the_result_holds_the_reference_at_the_output_instants(substeps):
+    """One sub-step per output step gives a view of the stage table (every other row), more
+    a copy; both are the reference's own table at the output grid, bit for bit."""
+    robot = Robot("r", controller("dynamic-feedback"), (0.3, -0.3, 0.0))
+    result = simulate(Scenario(references.eight(), [robot], duration=20.0, dt=0.01, substeps=substeps))
+    assert result.reference_rows.shape == (result.t.size, 10)
+    times, row_start = stage_times(0.01, np.full(2000, result.substeps[0]))
+    assert np.array_equal(result.reference_rows, references.eight().table(times[row_start]))
+    assert np.allclose(result.reference_rows[:, 0], result.t, rtol=0, atol=1e-12)
+    shared = np.shares_memory(result.reference_rows, result.reference_rows.base) if result.reference_rows.base \
+        is not None else False
+    assert shared == (substeps in (None, 1)) == (result.reference_rows.strides[0] == 160)
 
 
 def test_stiff_cascaded_law_is_substepped():

@@ -72,6 +72,33 @@ def signals_interrupt():
 PROGRAM_GC_THRESHOLD = (2_000, 10, 10)
 
 
+# Run as the ``nonholo`` program, glibc's malloc serves arrays of up to 32 MiB (its largest
+# setting) from its heap and keeps up to 256 MiB of freed memory there for the next ones,
+# instead of mapping fresh pages from the kernel for every large array and returning them at
+# every free: a recorded Test 1 run allocates ~9 MB of tables and records, and with glibc's
+# own adaptive thresholds it faulted them in page by page at every run (2,200 page faults,
+# 3.3 ms of a 7.7 ms run). Set only for the program (as ``PROGRAM_GC_THRESHOLD``); a Python
+# user gets the same with the environment variables MALLOC_MMAP_THRESHOLD_=33554432 and
+# MALLOC_TRIM_THRESHOLD_=268435456 (docs/performance.md).
+PROGRAM_MMAP_BYTES = 32 * 2**20
+PROGRAM_TRIM_BYTES = 256 * 2**20
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3   # glibc's mallopt parameters (malloc.h)
+
+
+def tune_allocator() -> bool:
+    """Set the C library's malloc thresholds of ``PROGRAM_MMAP_BYTES`` and
+    ``PROGRAM_TRIM_BYTES`` for this process, where it has glibc's ``mallopt`` (not on macOS or
+    Windows; musl's ignores them); whether it took both."""
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError, TypeError):
+        return False
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    return bool(mallopt(_M_MMAP_THRESHOLD, PROGRAM_MMAP_BYTES)) & bool(mallopt(_M_TRIM_THRESHOLD, PROGRAM_TRIM_BYTES))
+
+
 @contextlib.contextmanager
 def collector_for_long_work():
     """Leave what is alive now (the imported modules, numba's and matplotlib's own objects)
@@ -109,8 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     from nonholo.errors import NonholoInputError, SimulationError
 
     prog = "nonholo"
-    if argv is None:   # the program itself (see PROGRAM_GC_THRESHOLD)
+    if argv is None:   # the program itself (see PROGRAM_GC_THRESHOLD, PROGRAM_MMAP_BYTES)
         gc.set_threshold(*PROGRAM_GC_THRESHOLD)
+        tune_allocator()
     try:
         try:
             parser = build_parser()
