@@ -27,8 +27,8 @@ def test_main_called_from_python_keeps_the_caller_s_thresholds(capsys):
 _CHURN = """
 import resource, sys
 import numpy as np
-from nonholo.cli import tune_allocator
-tuned = tune_allocator() if sys.argv[1] == "tuned" else None
+from nonholo.cli import tune_memory
+tuned = tune_memory()["malloc"] if sys.argv[1] == "tuned" else None
 def churn():   # a recorded run's pattern: several arrays of a few MB, filled, then all freed
     arrays = [np.empty(2**19) for _ in range(4)]   # 4 MiB each
     for a in arrays:
@@ -43,7 +43,7 @@ print(tuned, (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 20)
 
 
 def test_the_program_s_allocator_keeps_freed_arrays_for_the_next_ones():
-    """Run as the program, ``nonholo`` sets glibc's malloc thresholds (``tune_allocator``):
+    """Run as the program, ``nonholo`` sets glibc's malloc thresholds (``tune_memory``):
     arrays of a few MB, freed and allocated again, are served from memory already mapped
     instead of being faulted in again page by page (about 2,000 faults a round here without)."""
     import subprocess
@@ -61,3 +61,26 @@ def test_the_program_s_allocator_keeps_freed_arrays_for_the_next_ones():
         pytest.skip("no glibc mallopt here (the tuning is for glibc's malloc only)")
     _, without = faults("default")
     assert with_tuning < 50 < 1_000 < without
+
+
+def test_huge_page_advice_is_turned_off_where_the_kernel_would_compact_for_it():
+    """Where transparent huge pages are compacted on demand (THP defrag "madvise" or
+    "always"), the program asks numpy not to advise them (``tune_memory``); elsewhere it
+    leaves numpy's default. Checked in a fresh process, whose numpy state it then reads."""
+    import subprocess
+    import sys
+
+    code = ("import numpy; from nonholo.cli import tune_memory; taken = tune_memory(); "
+            "core = getattr(numpy, '_core', None) or numpy.core; "
+            "print(taken['hugepages_off'], core.multiarray._set_madvise_hugepage(True))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         check=True).stdout.split()
+    try:
+        with open("/sys/kernel/mm/transparent_hugepage/defrag") as handle:
+            defrag = handle.read()
+        compacting = "[madvise]" in defrag or "[always]" in defrag
+    except OSError:
+        compacting = False
+    assert out[0] == str(compacting)
+    if compacting:
+        assert out[1] == "False"   # the advice was off when it was switched back on

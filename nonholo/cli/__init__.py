@@ -72,31 +72,54 @@ def signals_interrupt():
 PROGRAM_GC_THRESHOLD = (2_000, 10, 10)
 
 
-# Run as the ``nonholo`` program, glibc's malloc serves arrays of up to 32 MiB (its largest
-# setting) from its heap and keeps up to 256 MiB of freed memory there for the next ones,
-# instead of mapping fresh pages from the kernel for every large array and returning them at
-# every free: a recorded Test 1 run allocates ~9 MB of tables and records, and with glibc's
-# own adaptive thresholds it faulted them in page by page at every run (2,200 page faults,
-# 3.3 ms of a 7.7 ms run). Set only for the program (as ``PROGRAM_GC_THRESHOLD``); a Python
-# user gets the same with the environment variables MALLOC_MMAP_THRESHOLD_=33554432 and
-# MALLOC_TRIM_THRESHOLD_=268435456 (docs/performance.md).
+# Run as the ``nonholo`` program, fresh memory is made cheaper to get (``tune_memory``):
+# * glibc's malloc serves arrays of up to 32 MiB (its largest setting) from its heap and keeps
+#   up to 256 MiB of freed memory there for the next ones, instead of mapping fresh pages for
+#   every large array and returning them at every free. A recorded Test 1 run allocates ~9 MB
+#   of tables and records; with glibc's adaptive thresholds they were faulted in page by page
+#   at every run (2,245 page faults, 3.3 ms of a 7.7 ms run).
+# * numpy does not advise the kernel to back arrays of 4 MB and more with transparent huge
+#   pages where the kernel then compacts memory at the first touch (THP ``defrag`` set to
+#   ``madvise`` or ``always``, the usual default): on this kind of virtual machine the gain
+#   sweeps' reference tables (30–50 MB each) were written at 140–200 ns a row instead of 23,
+#   0.8 s of the leader study.
+# Set only for the program (as ``PROGRAM_GC_THRESHOLD``); from Python, the environment
+# variables MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=268435456
+# NUMPY_MADVISE_HUGEPAGE=0 do the same (docs/performance.md).
 PROGRAM_MMAP_BYTES = 32 * 2**20
 PROGRAM_TRIM_BYTES = 256 * 2**20
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3   # glibc's mallopt parameters (malloc.h)
+_THP_DEFRAG = "/sys/kernel/mm/transparent_hugepage/defrag"
 
 
-def tune_allocator() -> bool:
-    """Set the C library's malloc thresholds of ``PROGRAM_MMAP_BYTES`` and
-    ``PROGRAM_TRIM_BYTES`` for this process, where it has glibc's ``mallopt`` (not on macOS or
-    Windows; musl's ignores them); whether it took both."""
+def tune_memory() -> dict[str, bool]:
+    """Set this process's malloc thresholds (``PROGRAM_MMAP_BYTES``, ``PROGRAM_TRIM_BYTES``)
+    where the C library is glibc, and turn numpy's huge-page advice off where the kernel
+    would compact memory for it (see above); which of the two took."""
     import ctypes
 
+    import numpy
+
+    taken = {"malloc": False, "hugepages_off": False}
     try:
-        mallopt = ctypes.CDLL(None).mallopt
+        mallopt = ctypes.CDLL(None).mallopt   # glibc's (musl's ignores these; none on macOS, Windows)
+        mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+        taken["malloc"] = bool(mallopt(_M_MMAP_THRESHOLD, PROGRAM_MMAP_BYTES)) & \
+            bool(mallopt(_M_TRIM_THRESHOLD, PROGRAM_TRIM_BYTES))
     except (OSError, AttributeError, TypeError):
-        return False
-    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
-    return bool(mallopt(_M_MMAP_THRESHOLD, PROGRAM_MMAP_BYTES)) & bool(mallopt(_M_TRIM_THRESHOLD, PROGRAM_TRIM_BYTES))
+        pass
+    try:
+        with open(_THP_DEFRAG) as handle:
+            defrag = handle.read()
+    except OSError:   # no transparent huge pages (not Linux)
+        return taken
+    if "[madvise]" in defrag or "[always]" in defrag:
+        core = getattr(numpy, "_core", None) or numpy.core   # numpy 2 / numpy 1.26
+        switch = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+        if switch is not None:
+            switch(False)
+            taken["hugepages_off"] = True
+    return taken
 
 
 @contextlib.contextmanager
@@ -136,9 +159,9 @@ def main(argv: list[str] | None = None) -> int:
     from nonholo.errors import NonholoInputError, SimulationError
 
     prog = "nonholo"
-    if argv is None:   # the program itself (see PROGRAM_GC_THRESHOLD, PROGRAM_MMAP_BYTES)
+    if argv is None:   # the program itself (see PROGRAM_GC_THRESHOLD, tune_memory)
         gc.set_threshold(*PROGRAM_GC_THRESHOLD)
-        tune_allocator()
+        tune_memory()
     try:
         try:
             parser = build_parser()

@@ -624,14 +624,13 @@ def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:
 def finish_figure(fig, axes, title: str, path: Path) -> None:
     """Grid on every panel, each panel's legend under it (never over the data), the title;
     saved to ``path`` and closed."""
-    from nonholo.studies.plots import plt
+    from nonholo.studies.plots import save_figure
 
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, frameon=False)
     fig.suptitle(title, fontsize=14)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:

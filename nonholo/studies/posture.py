@@ -373,7 +373,7 @@ LAW_COLORS = {"time-varying": "tab:blue", "polar": "tab:orange", "dynamic-feedba
 
 def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
     """Figures 5.46–5.51 in one: paths to each goal, distance to the goal, heading."""
-    from nonholo.studies.plots import legend_below, plt
+    from nonholo.studies.plots import legend_below, plt, save_figure
 
     fig, axes = plt.subplots(2, 2, figsize=(13, 11))
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.92, wspace=0.2, hspace=0.42)
@@ -406,14 +406,13 @@ def plot_posture_runs(result: PostureStudyResult, path: Path) -> None:
         ax.grid(True, alpha=0.3)
     legend_below(fig, ax_distance, ncol=6, fontsize=8.5)
     fig.suptitle("Posture stabilization from (−10, −10): time-varying, polar and dynamic FL laws (60 s)", fontsize=14)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_posture_inputs(result: PostureStudyResult, path: Path) -> None:
     """Small multiples, one row per law: the applied v and ω to each goal (solid: (0, 0),
     dashed: (−10, 10)); start-up spikes are clipped and named above the panel."""
-    from nonholo.studies.plots import legend_below, peak_note, plt, robust_range
+    from nonholo.studies.plots import legend_below, peak_note, plt, robust_range, save_figure
 
     fig, axes = plt.subplots(len(LAWS), 2, figsize=(13, 9.5), sharex=True, sharey="col", squeeze=False)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.9, wspace=0.15, hspace=0.55)
@@ -438,12 +437,11 @@ def plot_posture_inputs(result: PostureStudyResult, path: Path) -> None:
     legend_below(fig, axes[0, 0], ncol=2)
     fig.suptitle("Posture stabilization: what each law applies (solid: goal (0, 0); dashed: goal (−10, 10))",
                  fontsize=13)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
-    from nonholo.studies.plots import legend_below, plt
+    from nonholo.studies.plots import legend_below, plt, save_figure
 
     goal = GOALS["(-10, 10)"]
     runs = {"correct (goal frame)": result.runs[case_key("polar", "(-10, 10)")],
@@ -466,8 +464,7 @@ def plot_polar_variants(result: PostureStudyResult, path: Path) -> None:
     legend_below(fig, ax_path, ncol=5, fontsize=9)
     fig.suptitle("Polar law, goal (−10, 10): the thesis's “does not converge” needs an implementation error",
                  fontsize=13)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 # ------------------------------------------------------------------ running
