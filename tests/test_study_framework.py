@@ -170,3 +170,36 @@ def test_the_report_writer_keeps_no_study_result(tmp_path):
     assert alive() is None
     page = writer.finish().read_text(encoding="utf-8")
     assert 'id="leader-tables"' in page and 'id="appendix"' in page
+
+
+def test_log_axis_labels_are_plain_text_with_the_same_values():
+    """The report's log axes are labelled 10⁻⁴, 2×10⁻⁴ … in plain text (``plain_log_labels``),
+    the labels matplotlib's mathtext would draw, tick for tick."""
+    import matplotlib.pyplot as plt
+
+    from nonholo.studies.plots import PlainLogFormatter, plain_log_labels
+
+    fig, (wide, narrow) = plt.subplots(1, 2)
+    wide.semilogy([0, 1], [1e-7, 1e2])
+    narrow.set_yscale("log")
+    narrow.set_ylim(2e-4, 7e-3)   # within a decade: minor ticks get labels too
+    fig.canvas.draw()
+    mathtext = [[t.get_text() for t in ax.yaxis.get_ticklabels(minor=minor)] for ax in (wide, narrow)
+                for minor in (False, True)]
+    plain_log_labels(fig)
+    assert isinstance(wide.yaxis.get_major_formatter(), PlainLogFormatter)
+    fig.canvas.draw()
+    plain = [[t.get_text() for t in ax.yaxis.get_ticklabels(minor=minor)] for ax in (wide, narrow)
+             for minor in (False, True)]
+    plt.close(fig)
+    assert "$\\mathdefault{10^{-4}}$" in mathtext[0] and "10⁻⁴" in plain[0]
+    assert any("\\times" in label for label in mathtext[3])   # labelled minor ticks: 2×10⁻³ …
+    for before, after in zip(mathtext, plain):
+        assert len(before) == len(after)
+        for m, p in zip(before, after):
+            expected = (m.replace("$\\mathdefault{", "").replace("}$", "").replace("\\times", "×")
+                        .replace("^{", "^").replace("}", ""))
+            if "^" in expected:
+                base, exponent = expected.split("^")
+                expected = base + exponent.translate(str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻"))
+            assert p == expected
