@@ -135,8 +135,7 @@ class _OverBudget(BaseException):
     that sympy's own ``except Exception`` clauses cannot swallow it."""
 
 
-@contextmanager
-def symbolic_budget(where: str):
+class symbolic_budget:  # noqa: N801 - used as ``with symbolic_budget(where):``, a context manager's name
     """Bound the symbolic work done in this block to ``MAX_SYMBOLIC_STEPS`` Python function
     calls, else one ``ExpressionError`` line naming ``where``. Blocks nested in a bounded
     one share its budget.
@@ -153,39 +152,47 @@ def symbolic_budget(where: str):
     in a finalizer (a generator closed by the garbage collector, whose exceptions Python
     only reports as unraisable), the counter is put back from ``sys.unraisablehook``, so
     the next call raises where it cannot be swallowed. Should sympy itself swallow the
-    exception, the block is refused when it ends all the same.
+    exception, the block is refused when it ends all the same. The counter never raises in
+    this class's own ``__exit__`` (the block's last traced call), which turns every way the
+    budget ran out into the one ``ExpressionError``.
     """
-    if getattr(_BUDGET, "active", False):
-        yield
-        return
-    previous, steps, over = sys.gettrace(), 0, False
-    limit = MAX_SYMBOLIC_STEPS
 
-    def count(frame, event, arg):
-        nonlocal steps, over
-        steps += 1
-        if steps > limit:
-            over = True
-            raise _OverBudget
-        return previous(frame, event, arg) if previous is not None else None
+    def __init__(self, where: str):
+        self.where, self.nested = where, False
 
-    refused = ExpressionError(f"{where}: symbolic work beyond its budget of {limit:,} steps "
-                              "(write a simpler formula)")
-    _BUDGET.active, _BUDGET.counter = True, count
-    _watch_finalizers(True)
-    sys.settrace(count)
-    try:
-        yield
-    except _OverBudget:
-        raise refused from None
-    finally:
-        sys.settrace(previous)
+    def __enter__(self):
+        if getattr(_BUDGET, "active", False):
+            self.nested = True
+            return self
+        self.previous, self.steps, self.over, self.limit = sys.gettrace(), 0, False, MAX_SYMBOLIC_STEPS
+        previous, limit = self.previous, self.limit
+
+        def count(frame, event, arg):
+            self.steps += 1
+            if self.steps > limit:
+                self.over = True
+                if frame.f_code is not _BUDGET_EXIT:
+                    raise _OverBudget
+            return previous(frame, event, arg) if previous is not None else None
+
+        _BUDGET.active, _BUDGET.counter = True, count
+        _watch_finalizers(True)
+        sys.settrace(count)
+        return self
+
+    def __exit__(self, kind, error, traceback):
+        if self.nested:
+            return False
+        sys.settrace(self.previous)   # first: nothing below is counted
         _BUDGET.active, _BUDGET.counter = False, None
         _watch_finalizers(False)
-    if over:
-        raise refused
+        if kind is _OverBudget or (self.over and (kind is None or issubclass(kind, Exception))):
+            raise ExpressionError(f"{self.where}: symbolic work beyond its budget of {self.limit:,} steps "
+                                  "(write a simpler formula)") from None
+        return False
 
 
+_BUDGET_EXIT = symbolic_budget.__exit__.__code__
 _HOOK = threading.Lock()
 _HOOK_USERS = 0  # budgets running in any thread
 _HOOK_PREVIOUS = None  # sys.unraisablehook before the first of them
@@ -198,13 +205,17 @@ def _watch_finalizers(start: bool) -> None:
     with _HOOK:
         if start:
             if _HOOK_USERS == 0:
-                _HOOK_PREVIOUS, sys.unraisablehook = sys.unraisablehook, _unraisable
+                current = sys.unraisablehook
+                # (never our own hook as the one to restore: it may have been put back by
+                # someone who saved it while a budget ran)
+                _HOOK_PREVIOUS = None if current is _unraisable else current
+                sys.unraisablehook = _unraisable
             _HOOK_USERS += 1
         else:
             _HOOK_USERS -= 1
             if _HOOK_USERS == 0:
                 if sys.unraisablehook is _unraisable:
-                    sys.unraisablehook = _HOOK_PREVIOUS
+                    sys.unraisablehook = _HOOK_PREVIOUS or sys.__unraisablehook__
                 _HOOK_PREVIOUS = None
 
 
@@ -216,7 +227,8 @@ def _unraisable(info) -> None:
     if counter is not None and isinstance(info.exc_value, _OverBudget):
         sys.settrace(counter)
         return
-    (_HOOK_PREVIOUS or sys.__unraisablehook__)(info)
+    previous = _HOOK_PREVIOUS
+    (previous if previous is not None and previous is not _unraisable else sys.__unraisablehook__)(info)
 
 
 @contextmanager

@@ -173,6 +173,19 @@ def test_symbolic_work_beyond_the_budget_is_one_line(monkeypatch):
     assert sys.gettrace() is None or "coverage" in type(sys.gettrace()).__module__
 
 
+def _step():
+    return None
+
+
+def _cleaning_up(calls: int):
+    """A generator whose cleanup (when it is closed) makes ``calls`` Python calls."""
+    try:
+        yield
+    finally:
+        for _ in range(calls):
+            _step()
+
+
 def test_the_budget_holds_when_it_runs_out_in_a_finalizer(monkeypatch):
     """Found in CI: the step that crosses the budget ran while the garbage collector closed
     one of sympy's generators. Python swallows an exception there and drops the trace
@@ -180,21 +193,11 @@ def test_the_budget_holds_when_it_runs_out_in_a_finalizer(monkeypatch):
     while its cleanup makes the calls that cross the budget."""
     monkeypatch.setattr(nonholo.expressions, "MAX_SYMBOLIC_STEPS", 100)
     calls_after = []
-
-    def step():
-        return None
-
-    def cleaning_up():
-        try:
-            yield
-        finally:
-            for _ in range(1_000):  # crosses the budget here, where Python cannot raise
-                step()
-
+    step = _step
     previous_hook = sys.unraisablehook
     with pytest.raises(ExpressionError, match="beyond its budget of 100 steps"):
         with nonholo.expressions.symbolic_budget("x"):
-            generator = cleaning_up()
+            generator = _cleaning_up(1_000)   # crosses the budget in its cleanup, where Python cannot raise
             next(generator)
             del generator  # closed now: its exception is reported as unraisable, not raised
             for _ in range(1_000):
@@ -565,3 +568,48 @@ def test_integers_past_the_float_range_are_refused_in_one_short_line():
     with pytest.raises(NonholoInputError, match="three finite numbers") as info:
         Robot("r", start=(10**400, 0.0, 0.0))
     assert len(str(info.value)) <= 300
+
+
+def test_the_budget_running_out_at_the_block_s_last_call_is_one_line(monkeypatch):
+    """Found by review: the step that crossed the budget could be the context manager's own
+    exit (the block's last traced call), where the counter's exception escaped as a bare
+    BaseException. Every budget from 1 step up is either enough or refused in one line."""
+    t = nonholo.expressions.sp.Symbol("t")
+    outcomes = set()
+    for limit in [*range(1, 400, 3), *range(400, 20_000, 97), 10**7]:
+        monkeypatch.setattr(nonholo.expressions, "MAX_SYMBOLIC_STEPS", limit)
+        try:
+            nonholo.expressions.parse_expression("t**2 + sin(3*t)", {"t": t})
+            outcomes.add("accepted")
+        except ExpressionError as error:
+            assert "beyond its budget" in str(error)
+            outcomes.add("refused")
+    assert outcomes == {"accepted", "refused"}
+
+    for limit in range(4, 12):   # the finalizer's swallowed crossing re-arms the counter just before the exit
+        monkeypatch.setattr(nonholo.expressions, "MAX_SYMBOLIC_STEPS", limit)
+        try:
+            with nonholo.expressions.symbolic_budget("w"):
+                for _ in range(5):
+                    _step()
+                generator = _cleaning_up(1)
+                next(generator)
+                del generator
+        except ExpressionError:
+            pass
+    assert sys.gettrace() is None or "coverage" in type(sys.gettrace()).__module__
+
+
+def test_the_budget_hook_is_restored_when_others_save_and_restore_it_out_of_order():
+    """Found by review: a hook saved by someone else while a budget ran (ours) and put back
+    after it ended must not become the hook to restore next time."""
+    original = sys.unraisablehook
+    with nonholo.expressions.symbolic_budget("a"):
+        saved_by_other = sys.unraisablehook   # ours
+    sys.unraisablehook = saved_by_other       # the other code restores what it saved
+    try:
+        with nonholo.expressions.symbolic_budget("b"):
+            pass
+        assert sys.unraisablehook is not saved_by_other   # not ours any more: the default came back
+    finally:
+        sys.unraisablehook = original

@@ -203,3 +203,21 @@ def test_log_axis_labels_are_plain_text_with_the_same_values():
                 base, exponent = expected.split("^")
                 expected = base + exponent.translate(str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻"))
             assert p == expected
+
+
+def test_save_figure_writes_other_formats_and_closes_the_figure(tmp_path):
+    """Found by review: the PNG compression level must not reach matplotlib's SVG or PDF
+    writers (``SweepResult.plot("g.pdf")``), and a figure is closed even if saving fails."""
+    import matplotlib.pyplot as plt
+
+    from nonholo.studies.plots import save_figure
+
+    for name in ("f.png", "f.svg", "f.pdf"):
+        fig, ax = plt.subplots()
+        ax.semilogy([1, 2], [1e-3, 1])
+        save_figure(fig, tmp_path / name)
+        assert (tmp_path / name).stat().st_size > 0 and not plt.fignum_exists(fig.number)
+    fig, _ = plt.subplots()
+    with pytest.raises(ValueError):
+        save_figure(fig, tmp_path / "f.unknown-format")
+    assert not plt.fignum_exists(fig.number)

@@ -80,9 +80,9 @@ PROGRAM_GC_THRESHOLD = (2_000, 10, 10)
 #   at every run (2,245 page faults, 3.3 ms of a 7.7 ms run).
 # * numpy does not advise the kernel to back arrays of 4 MB and more with transparent huge
 #   pages where the kernel then compacts memory at the first touch (THP ``defrag`` set to
-#   ``madvise`` or ``always``, the usual default): on this kind of virtual machine the gain
-#   sweeps' reference tables (30–50 MB each) were written at 140–200 ns a row instead of 23,
-#   0.8 s of the leader study.
+#   ``madvise``, ``defer+madvise`` or ``always``; ``madvise`` is the usual default): on this
+#   kind of virtual machine the gain sweeps' reference tables (30–50 MB each) were written
+#   at 140–200 ns a row instead of 23, 0.8 s of the leader study.
 # Set only for the program (as ``PROGRAM_GC_THRESHOLD``); from Python, the environment
 # variables MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=268435456
 # NUMPY_MADVISE_HUGEPAGE=0 do the same (docs/performance.md).
@@ -98,8 +98,6 @@ def tune_memory() -> dict[str, bool]:
     would compact memory for it (see above); which of the two took."""
     import ctypes
 
-    import numpy
-
     taken = {"malloc": False, "hugepages_off": False}
     try:
         mallopt = ctypes.CDLL(None).mallopt   # glibc's (musl's ignores these; none on macOS, Windows)
@@ -113,12 +111,16 @@ def tune_memory() -> dict[str, bool]:
             defrag = handle.read()
     except OSError:   # no transparent huge pages (not Linux)
         return taken
-    if "[madvise]" in defrag or "[always]" in defrag:
-        core = getattr(numpy, "_core", None) or numpy.core   # numpy 2 / numpy 1.26
-        switch = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
-        if switch is not None:
-            switch(False)
-            taken["hugepages_off"] = True
+    if any(f"[{mode}]" in defrag for mode in ("madvise", "defer+madvise", "always")):
+        try:
+            from numpy._core.multiarray import _set_madvise_hugepage as switch   # numpy 2
+        except ImportError:
+            try:
+                from numpy.core.multiarray import _set_madvise_hugepage as switch   # numpy 1.26
+            except ImportError:
+                return taken
+        switch(False)
+        taken["hugepages_off"] = True
     return taken
 
 

@@ -101,8 +101,11 @@ def save_figure(fig, path, dpi: int = DPI):
     sixth larger (the report's figures are flat colours and lines)."""
     plain_log_labels(fig)
     if path is not None:
-        fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": PNG_COMPRESSION})
-        plt.close(fig)
+        png = str(path).lower().endswith(".png")   # (SVG, PDF: matplotlib's own writers, no zlib level)
+        try:
+            fig.savefig(path, dpi=dpi, **({"pil_kwargs": {"compress_level": PNG_COMPRESSION}} if png else {}))
+        finally:
+            plt.close(fig)
     return fig
 
 
