@@ -164,17 +164,17 @@ class symbolic_budget:  # noqa: N801 - used as ``with symbolic_budget(where):``,
         if getattr(_BUDGET, "active", False):
             self.nested = True
             return self
-        self.previous, self.steps, self.over, self.limit = sys.gettrace(), 0, False, MAX_SYMBOLIC_STEPS
-        previous, limit = self.previous, self.limit
+        self.previous, self.limit = previous, limit = sys.gettrace(), MAX_SYMBOLIC_STEPS
+        steps = 0
 
-        def count(frame, event, arg):
-            self.steps += 1
-            if self.steps > limit:
-                self.over = True
-                if frame.f_code is not _BUDGET_EXIT:
-                    raise _OverBudget
+        def count(frame, event, arg):   # (a closure's variable: this runs at every Python call)
+            nonlocal steps
+            steps += 1
+            if steps > limit and frame.f_code is not _BUDGET_EXIT:
+                raise _OverBudget
             return previous(frame, event, arg) if previous is not None else None
 
+        self.exhausted = lambda: steps > limit
         _BUDGET.active, _BUDGET.counter = True, count
         _watch_finalizers(True)
         sys.settrace(count)
@@ -186,7 +186,7 @@ class symbolic_budget:  # noqa: N801 - used as ``with symbolic_budget(where):``,
         sys.settrace(self.previous)   # first: nothing below is counted
         _BUDGET.active, _BUDGET.counter = False, None
         _watch_finalizers(False)
-        if kind is _OverBudget or (self.over and (kind is None or issubclass(kind, Exception))):
+        if kind is _OverBudget or (self.exhausted() and (kind is None or issubclass(kind, Exception))):
             raise ExpressionError(f"{self.where}: symbolic work beyond its budget of {self.limit:,} steps "
                                   "(write a simpler formula)") from None
         return False
@@ -227,8 +227,7 @@ def _unraisable(info) -> None:
     if counter is not None and isinstance(info.exc_value, _OverBudget):
         sys.settrace(counter)
         return
-    previous = _HOOK_PREVIOUS
-    (previous if previous is not None and previous is not _unraisable else sys.__unraisablehook__)(info)
+    (_HOOK_PREVIOUS or sys.__unraisablehook__)(info)
 
 
 @contextmanager

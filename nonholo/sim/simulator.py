@@ -380,7 +380,8 @@ def _output_rows(stage_rows: np.ndarray, row_start: np.ndarray) -> np.ndarray:
     """The stage table's rows at the output instants. With one RK4 step per output step (the
     output instants are every other row) a view, which keeps twice the rows alive instead of
     copying half of them at every run; else a copy (a view would keep 2m times the rows)."""
-    if stage_rows.shape[0] == 2 * row_start.size - 1 and np.array_equal(row_start, np.arange(0, stage_rows.shape[0], 2)):
+    every_other = np.arange(0, stage_rows.shape[0], 2)
+    if stage_rows.shape[0] == 2 * row_start.size - 1 and np.array_equal(row_start, every_other):
         return stage_rows[::2]
     return stage_rows[row_start]
 
