@@ -93,7 +93,8 @@ def _sin_cos_arrays(x, sin_out, cos_out):
         sin_out[i], cos_out[i] = sincos(x[i])
 
 
-def _array_sincos(x):
+def array_sincos(x):
+    """(sin x, cos x) of an array with the SIMD ``sincos`` (numpy beyond ``SINCOS_EXACT_RANGE``)."""
     x = np.asarray(x, dtype=float)
     flat = np.ascontiguousarray(x).ravel()
     sin_out, cos_out = np.empty_like(flat), np.empty_like(flat)
@@ -106,9 +107,9 @@ def _array_sincos(x):
 
 def array_sin(x):
     """sin of an array with the SIMD ``sincos`` (numpy beyond ``SINCOS_EXACT_RANGE``)."""
-    return _array_sincos(x)[0]
+    return array_sincos(x)[0]
 
 
 def array_cos(x):
     """cos of an array with the SIMD ``sincos`` (numpy beyond ``SINCOS_EXACT_RANGE``)."""
-    return _array_sincos(x)[1]
+    return array_sincos(x)[1]

@@ -103,3 +103,49 @@ def test_vanishing_speed_is_found_between_grid_points():
     with pytest.raises(InfeasibleReferenceError, match=r"t = 3\.0012"):
         ref.check_speed(0.0, 10.0)
     references.eight().check_speed(0.0, 80 * np.pi)  # min speed 0.174 m/s: feasible
+
+
+def test_table_rows_are_the_feedforward_formulas_bit_for_bit():
+    """``table_rows`` (one compiled pass) gives the numbers of the spec's formulas written as
+    numpy array expressions, to the bit: speeds that vanish (ω_d = 0 there), non-finite
+    derivatives, both directions, and the angles of signed zeros."""
+    from nonholo.references.feedforward import feedforward, table_rows
+
+    rng = np.random.default_rng(7)
+    flat = rng.normal(scale=3.0, size=(6, 4000))
+    flat[2:4, :40] = 0.0                      # vanishing speed
+    flat[2:4, 40:44] = [[-0.0, 0.0, -0.0, 0.0], [0.0, -0.0, -0.0, 0.0]]
+    flat[4, 44], flat[2, 45], flat[3, 46] = np.nan, np.inf, -np.inf
+    t = np.arange(flat.shape[1]) * 0.01
+    for direction in (1, -1):
+        dx, dy, ddx, ddy = flat[2:]
+        speed_sq = dx * dx + dy * dy
+        with np.errstate(invalid="ignore", divide="ignore"):
+            omega = np.where(speed_sq > 0.0, (dx * ddy - dy * ddx) / np.where(speed_sq > 0.0, speed_sq, 1.0), 0.0)
+        expected = np.column_stack([t, flat.T, np.arctan2(direction * dy, direction * dx),
+                                    direction * np.sqrt(speed_sq), omega])
+        rows = table_rows(t, flat, direction)
+        assert rows.tobytes() == expected.tobytes()
+        theta, v, w = feedforward(dx.reshape(40, 100), dy.reshape(40, 100), ddx.reshape(40, 100),
+                                  ddy.reshape(40, 100), direction)
+        assert theta.shape == (40, 100) and v.tobytes() == expected[:, 8].tobytes()
+        assert theta.ravel().tobytes() == expected[:, 7].tobytes() and w.ravel().tobytes() == omega.tobytes()
+    theta, v, w = feedforward(3.0, 4.0, 0.0, 1.0)   # scalars broadcast
+    assert (float(theta), float(v), float(w)) == (np.arctan2(4.0, 3.0), 5.0, 3.0 / 25.0)
+
+
+def test_formula_tables_take_sin_and_cos_of_each_argument_once():
+    """sin(a) and cos(a) of one argument are one pair, computed once per table (the SIMD
+    ``array_sincos``), and the table matches numpy's sin and cos to rounding."""
+    import inspect
+
+    ref = references.expression("3*cos(t/7) + sin(2*t)", "sin(t/7)**2 - cos(2*t) + sin(t)")
+    source = inspect.getsource(ref._evaluate)
+    assert source.count("sin_cos_pair(") == 3   # t/7, 2*t and t
+    t = np.linspace(0.0, 60.0, 2001)
+    rows = ref.table(t)
+    x = 3 * np.cos(t / 7) + np.sin(2 * t)
+    dy = 2 * np.sin(t / 7) * np.cos(t / 7) / 7 + 2 * np.sin(2 * t) + np.cos(t)
+    ddx = -3 * np.cos(t / 7) / 49 - 4 * np.sin(2 * t)
+    assert np.allclose(rows[:, 1], x, rtol=0, atol=1e-14) and np.allclose(rows[:, 4], dy, rtol=0, atol=1e-14)
+    assert np.allclose(rows[:, 5], ddx, rtol=0, atol=1e-14)

@@ -8,7 +8,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from nonholo.errors import InfeasibleReferenceError, ScenarioError
-from nonholo.references.feedforward import feedforward
+from nonholo.references.feedforward import table_rows
 from nonholo.tomlfile import describe_value
 
 FORWARD, BACKWARD = 1, -1
@@ -56,14 +56,7 @@ class Reference(ABC):
         return rows
 
     def _table_piece(self, t: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        flat = self.flat_outputs(t)
-        rows[:, 0] = t
-        rows[:, 1:7] = flat.T
-        theta_d, v_d, omega_d = feedforward(flat[2], flat[3], flat[4], flat[5], self.direction)
-        rows[:, 7] = theta_d
-        rows[:, 8] = v_d
-        rows[:, 9] = omega_d
-        return rows
+        return table_rows(t, self.flat_outputs(t), self.direction, rows)
 
     def speed(self, t) -> np.ndarray:
         flat = self.flat_outputs(np.atleast_1d(np.asarray(t, dtype=float)))

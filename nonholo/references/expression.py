@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from operator import itemgetter
 
 import numpy as np
 import sympy as sp
@@ -25,7 +26,7 @@ import sympy as sp
 from nonholo.errors import ExpressionError, InfeasibleReferenceError, ScenarioError
 from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number,
                                  expression_size, parse_expression, quote, symbolic_budget, sympy_failures)
-from nonholo.numerics import array_cos, array_sin
+from nonholo.numerics import array_sincos
 from nonholo.references.base import FORWARD, Reference
 
 T = sp.Symbol("t", real=True)
@@ -70,10 +71,8 @@ class ExpressionReference(Reference):
             if sum(expression_size(e, MAX_COMPILED_NODES) for e in self._exprs) > MAX_COMPILED_NODES:
                 raise ExpressionError(f"the formulas and their derivatives have more than {MAX_COMPILED_NODES:,} "
                                       "nodes together: write a smaller formula")
-            numeric = [_for_numpy(e, label) for e, label in zip(self._exprs, ("x", "y") * 3)]
-            # sin and cos dominate the cost of evaluating a reference table: use the SIMD ones.
-            self._evaluate = sp.lambdify(T, numeric, modules=[{"sin": array_sin, "cos": array_cos}, "numpy"],
-                                         cse=True)
+            numeric = [_paired_sin_cos(_for_numpy(e, label)) for e, label in zip(self._exprs, ("x", "y") * 3)]
+            self._evaluate = sp.lambdify(T, numeric, modules=[_PAIRED_SIN_COS, "numpy"], cse=True)
 
     @classmethod
     def from_strings(cls, x: str, y: str, direction: int = FORWARD, default_duration: float | None = None,
@@ -192,6 +191,20 @@ def _for_numpy(expr: sp.Expr, label: str) -> sp.Expr:
         return expr
     args = [_for_numpy(a, label) for a in expr.args]
     return expr if all(a is b for a, b in zip(args, expr.args)) else expr.func(*args)
+
+
+# sin and cos dominate the cost of evaluating a reference table, and a formula's derivatives
+# take both of each argument: every sin(a) and cos(a) is rewritten as one element of a pair
+# computed once per argument (common subexpression elimination finds the shared pair) by the
+# SIMD ``array_sincos``.
+_SIN_COS_PAIR, _SIN_OF, _COS_OF = sp.Function("sin_cos_pair"), sp.Function("sin_of"), sp.Function("cos_of")
+_PAIRED_SIN_COS = {"sin_cos_pair": array_sincos, "sin_of": itemgetter(0), "cos_of": itemgetter(1)}
+
+
+def _paired_sin_cos(expr: sp.Expr) -> sp.Expr:
+    """``expr`` with sin(a) and cos(a) as the two elements of the pair ``sin_cos_pair(a)``."""
+    return expr.replace(sp.sin, lambda a: _SIN_OF(_SIN_COS_PAIR(a))).replace(
+        sp.cos, lambda a: _COS_OF(_SIN_COS_PAIR(a)))
 
 
 def _parameters(parameters) -> dict[str, sp.Rational]:
