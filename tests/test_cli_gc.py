@@ -24,6 +24,34 @@ def test_main_called_from_python_keeps_the_caller_s_thresholds(capsys):
     assert gc.get_threshold() == before
 
 
+def test_the_program_leaves_what_is_alive_at_exit_to_the_operating_system():
+    """Run as the program, ``nonholo`` freezes what is alive once the exit handlers have run
+    (Python's shutdown collections would traverse it all to free memory the operating system
+    takes back anyway): an exit handler registered before ``main`` runs after its own and sees
+    the objects frozen; files written by the command are complete. Called from Python,
+    ``main`` registers nothing."""
+    import atexit
+    import subprocess
+    import sys
+
+    code = ("import atexit, gc, sys\n"
+            "atexit.register(lambda: print('frozen at exit:', gc.get_freeze_count() > 10_000, flush=True))\n"
+            "sys.argv = ['nonholo', 'examples']\n"
+            "from nonholo.cli import main\n"
+            "print('exit code', main(), 'frozen before exit:', gc.get_freeze_count() > 0)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "exit code 0 frozen before exit: False" in out.stdout and "test1-eight" in out.stdout
+    assert out.stdout.rstrip().endswith("frozen at exit: True")
+    registered = []
+    atexit_register, atexit.register = atexit.register, registered.append
+    try:
+        assert main(["examples"]) == 0
+    finally:
+        atexit.register = atexit_register
+    assert registered == []
+
+
 _CHURN = """
 import resource, sys
 import numpy as np
