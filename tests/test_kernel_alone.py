@@ -95,6 +95,24 @@ def test_batches_past_one_chunk_integrate_every_copy_alike(name, substeps):
     assert not np.allclose(many.record[kn.REC_X, -1, 0, 0], many.record[kn.REC_X, -1, 0, copies - 1])
 
 
+@pytest.mark.parametrize("name", sorted(CONTROLLERS))
+def test_unrecorded_batches_add_each_sample_in_the_step_s_loop_alike(name):
+    # unrecorded, ``roots`` adds the sample at t_k to the statistics inside the RK4 step's
+    # loop; recorded, in a loop of its own after it: the same statistics to rounding (LLVM may
+    # fuse a multiply-add in one loop and not the other), the same event counts (limits that
+    # bind, two sub-steps per output step, copies past one chunk)
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
+    scenario = Scenario(references.eight(), [robot], duration=2.0, dt=0.01, substeps=2)
+    members = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(2.0 + 0.01 * i, -1.5, 0.3)),))
+               for i in range(kn.ROOTS_CHUNK + 3)]
+    recorded, unrecorded = simulate(members), simulate(members, record=False)
+    assert recorded.stats[kn.SAT_V].sum() + recorded.stats[kn.SAT_W].sum() > 0   # the limits acted
+    a, b = recorded.stats, unrecorded.stats
+    assert np.array_equal(np.isinf(a), np.isinf(b))
+    assert np.allclose(np.where(np.isinf(a), 0, a), np.where(np.isinf(b), 0, b), rtol=1e-14, atol=0)
+    assert np.array_equal(a[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]], b[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]])
+
+
 def test_integrate_refuses_what_it_leaves_to_roots_and_alone():
     # (dynamic feedback: the sampled-data tests compile its ``integrate`` anyway)
     robot = Robot("r", controller("dynamic-feedback"), (0.2, 0.1, 0.0))
