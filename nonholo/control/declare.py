@@ -133,6 +133,7 @@ class ControlLaw:
     xi_is_speed: bool = False
     needs_moving_reference: bool = True
     heading_controlled: bool = True
+    goal_relative: bool = True
     stiffness: Callable[[Mapping[str, float], float, float], float] = _no_stiffness
 
     @property
@@ -349,7 +350,8 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
                 variant: str = "default", aliases: Mapping[str, tuple[str, ...]] | None = None,
                 state: str | None = None, initial: float | str | None = None, xi_is_speed: bool | None = None,
                 stiffness: Callable[[Mapping[str, float], float, float], float] | None = None,
-                needs_moving_reference: bool | None = None, heading_controlled: bool = True):
+                needs_moving_reference: bool | None = None, heading_controlled: bool = True,
+                goal_relative: bool = True):
     """Register the decorated compiled law under ``name`` (its first variant ``variant``).
 
     ``gains``: name → ``Gain(default, rule)`` in the order the gain tuple takes them;
@@ -360,7 +362,10 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
     speed-like initial rules); ``stiffness(gains, v_d_max, omega_d_max)``: the fastest
     closed-loop rate (1/s); ``needs_moving_reference`` (default: True for tracking laws):
     the law needs v_d ≠ 0; ``heading_controlled`` (posture laws): the final heading is
-    regulated. Returns the law unchanged.
+    regulated; ``goal_relative`` (posture laws): the law reads the pose only relative to its
+    goal, as the spec's laws do (``goal_frame_pose``), so the simulator may integrate it with
+    the goal as origin (full precision near the goal); False for a law that reads the world
+    frame itself. Returns the law unchanged.
     """
 
     def register(function):
@@ -437,7 +442,8 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
             rules=MappingProxyType({g: d.rule for g, d in gains.items() if d.rule is not ANY}),
             gain_tuple=_gain_tuple(name, fields, function.py_func.__module__),
             aliases=MappingProxyType(alias_map), state=state, initial=initial_rule, xi_is_speed=speed,
-            needs_moving_reference=moving, heading_controlled=bool(heading_controlled), stiffness=law_stiffness)
+            needs_moving_reference=moving, heading_controlled=bool(heading_controlled),
+            goal_relative=bool(goal_relative), stiffness=law_stiffness)
         LAWS[name] = spec
         _BY_KIND[kind][name] = spec
         return function

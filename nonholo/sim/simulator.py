@@ -499,10 +499,34 @@ def trim_reference_cache(cache_: dict, keep: bytes) -> None:
             total -= sum(part.nbytes for part in cache_.pop(key))
 
 
+def goal_origin(group: Group) -> tuple[list[int], np.ndarray] | None:
+    """For a group whose roots are all posture roots under goal-relative laws (and so read
+    no reference): the roots' positions in the graph and each copy's first goal (x, y),
+    (2, copies), the origin it is integrated from. Near its goal a robot's pose is then
+    resolved to the last bit: in world coordinates a goal 14 m from the origin leaves
+    positions 2e-15 m apart, and the polar law's heading, which follows the direction to the
+    goal at 1e-9 m, froze 0.002° off instead of < 1e-7° (spec follower-posture.md §6 (d))."""
+    roots = [j for j, robot in enumerate(group.robots) if isinstance(robot, Robot)]
+    if not all(group.robots[j].posture and group.robots[j].controller.controller.goal_relative for j in roots):
+        return None
+    return roots, group.fields[:2, roots[0]].copy()
+
+
 def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
-    """Integrate a group; groups with followers re-plan from the measured rates."""
+    """Integrate a group; groups with followers re-plan from the measured rates. Under
+    continuous-time control a group of posture roots (and their followers) is integrated
+    with its first goal as origin (``goal_origin``); its record is in world coordinates.
+    (Sampled-data runs stay in world coordinates, as the robot programs of a fleet do.)"""
     n_steps, dt = scenario.n_steps, scenario.dt
     plan = group.prior
+    shift = goal_origin(group) if scenario.hold_every == 0 else None
+    fields, start = group.fields, group.state
+    if shift is not None:
+        roots, origin = shift
+        fields, start = group.fields.copy(), group.state.copy()
+        for j in roots:
+            fields[:2, j] -= origin
+        start[:2] -= origin[:, None, :]
     iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
     integrate = kernel.integrator(scenario.hold_every != 0, n_batch)
@@ -514,12 +538,12 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
             trim_reference_cache(cache_, key)
         rows, row_start, times = cache_[key]
         targets = group.targets(times) if group.followers else np.zeros((1, 4, n_robots))
-        state, branch = group.state.copy(), group.initial_branches()
+        state, branch = start.copy(), group.initial_branches()
         stats, pair_stats = kn.new_stats(n_robots, n_batch)
         records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
         held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
         step_rate = np.zeros(n_steps + 1)
-        args = (state, group.fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
+        args = (state, fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
                 group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max, group.xi_speed, dt,
                 scenario.hold_every)
         outputs = (stats, pair_stats, records, held, step_rate)
@@ -535,6 +559,8 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
         if np.all(needed <= plan):
             break
         plan = needed if iteration < iterations - 2 else np.maximum(plan, needed)
+    if shift is not None and record:
+        records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
     return stats, pair_stats, records, plan
 
 

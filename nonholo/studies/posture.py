@@ -100,8 +100,9 @@ def polar_world_distance_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
 
 WORLD_DISTANCE = "world-distance"
 # The polar controller with the faulty law as an extra variant (same gains, same name, so results
-# report it as the polar law with that variant).
-POLAR_WITH_FAULT = dataclasses.replace(POSTURE_CONTROLLERS["polar"],
+# report it as the polar law with that variant). It reads the world frame: integrated in world
+# coordinates (``goal_relative=False``).
+POLAR_WITH_FAULT = dataclasses.replace(POSTURE_CONTROLLERS["polar"], goal_relative=False,
                                        laws={**POSTURE_CONTROLLERS["polar"].laws, WORLD_DISTANCE: polar_world_distance_law})
 
 
@@ -165,14 +166,19 @@ def time_within(t: np.ndarray, distance: np.ndarray, radius: float) -> float | N
 
 
 def posture_record(key: str, result: FormationResult, goal=None) -> dict:
-    """Final distance to ``goal`` (default: the run's own goal), heading error, approach time."""
+    """Final distance to ``goal`` (default: the run's own goal), heading error, approach time.
+    The final distance to the run's own goal is the simulator's, computed where the run was
+    integrated (with the goal as origin: to the last bit, not to the 2e-15 m of a world
+    coordinate near (−10, 10))."""
     leader = result.formation.leaders[0]
+    own = goal is None or tuple(goal) == tuple(leader.goal)
     goal = tuple(goal or leader.goal)
     distance = goal_distance(result, goal)
+    final = result.posture_metrics(leader.name)["position_error"]["final"] if own else float(distance[-1])
     heading = abs(float(wrap(result.trajectory("theta")[0, -1] - goal[2])))
     late = result.t >= result.t[-1] - 10.0
     return {"case": key, "law": leader.controller.name, "variant": leader.controller.variant,
-            "goal": f"({goal[0]:g}, {goal[1]:g})", "T": float(result.t[-1]), "distance": float(distance[-1]),
+            "goal": f"({goal[0]:g}, {goal[1]:g})", "T": float(result.t[-1]), "distance": final,
             "distance_late_max": float(distance[late].max()), "heading_deg": math.degrees(heading),
             "near_time": time_within(result.t, distance, NEAR),
             "peak_v": float(np.abs(result.trajectory("v")[0]).max()),
