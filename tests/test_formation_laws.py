@@ -178,6 +178,17 @@ def test_wedge_is_nearly_singular_and_reported():
     # near sin(γ1 − γ2) = 0 is integrated (|v| > 200 m/s there), the time does not
     assert safety["min_abs_sin_gamma_difference"] < 0.02
     assert safety["min_abs_sin_gamma_time"] == pytest.approx(7.25, abs=0.05)
+    # the passage goes *through* sin(γ1 − γ2) = 0 between two samples (an exact solver's step
+    # size collapses at t = 7.2499 s): the sign changes are counted, exactly those of the record
+    from nonholo.sim import kernel as kn
+
+    sin_gamma = result.record[kn.REC_SIN_GAMMA, :, result.index("F"), 0]
+    flips = int(np.count_nonzero(sin_gamma[1:] * sin_gamma[:-1] < 0.0))
+    assert safety["sin_gamma_sign_changes"] == flips >= 1
+    first = np.flatnonzero(sin_gamma[1:] * sin_gamma[:-1] < 0.0)[0]
+    assert result.t[first] == pytest.approx(7.24, abs=0.015)
+    fine = simulate_formation(triangle(reference=references.circle(), duration=20.0))   # Test 4, no wedge
+    assert fine.follower_metrics("F")["safety"]["sin_gamma_sign_changes"] == 0
 
 
 def test_collinear_start_is_flagged_singular():

@@ -140,6 +140,9 @@ def format_summary(summary: dict) -> str:
             s = f["safety"]
             extra = f", min |sin(g1-g2)| {s['min_abs_sin_gamma_difference']:.3g}" if "min_abs_sin_gamma_difference" in s \
                 else ""
+            if s.get("sin_gamma_sign_changes"):   # the singular configuration passed between two samples
+                extra += (f", sin(g1-g2) changed sign {s['sin_gamma_sign_changes']} time(s) between samples: the "
+                          "l-l singularity was crossed, results after it depend on the step")
             notes.append(f"{name}: closest robot {_g(s['min_distance'], 0)} m at t = {_g(s['min_distance_time'], 0)} s, "
                          f"{s['time_below_2d']:.3g} s below 2d{extra}")
             for change in f["settling"] or []:

@@ -83,8 +83,9 @@ MAX_FIELDS = FIELDS_SIZE   # a root's law fields (at most MAX_LAW_FIELDS); a fol
 K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
- SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D) = range(25)
-STAT_COUNT = 25
+ SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D, SIN_LAST,
+ SIN_CROSSINGS) = range(27)
+STAT_COUNT = 27
 ROBOT_STATS = FIRST_SINGULAR + 1   # the statistics of every robot (``add_sample``); the rest: formations
 # ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order.
 assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
@@ -630,9 +631,14 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             for r in range(n_robots):
                 if kinds[r] == SEPARATION_SEPARATION:
                     for b in range(n_batch):
-                        s = abs(instant[I_SIN_GAMMA, r, b])
+                        signed = instant[I_SIN_GAMMA, r, b]
+                        s = abs(signed)
                         stats[MIN_SIN_T, r, b] = t if s < stats[MIN_SIN, r, b] else stats[MIN_SIN_T, r, b]
                         stats[MIN_SIN, r, b] = min(stats[MIN_SIN, r, b], s)
+                        # a sign change from the last sample: sin(γ1 − γ2) went through 0, the
+                        # singular configuration, between two samples (spec §3.2)
+                        stats[SIN_CROSSINGS, r, b] += 1.0 if signed * stats[SIN_LAST, r, b] < 0.0 else 0.0
+                        stats[SIN_LAST, r, b] = signed
             if n_robots > 1:
                 for b in range(n_batch):
                     closest, first, second = np.inf, -1, -1

@@ -256,7 +256,7 @@ class SimulationResult:
                   "peak_omega_time": s(k.W_PEAK_T), "saturated_samples": self._events(i, member)["saturated_samples"]}
         if follower.law != "separation-bearing":
             safety.update(min_abs_sin_gamma_difference=s(k.MIN_SIN), min_abs_sin_gamma_time=s(k.MIN_SIN_T),
-                          singular_samples=int(s(k.SINGULAR)))
+                          singular_samples=int(s(k.SINGULAR)), sin_gamma_sign_changes=int(s(k.SIN_CROSSINGS)))
         out["safety"] = safety
         return out
 

@@ -265,7 +265,8 @@ def sample_metrics(result, saturation_share: float) -> dict:
     bad = diverged(stats)
     metrics = np.column_stack(columns)
     collision = (result.pair_stats[kn.BELOW_ANY][formations] > 0).any(axis=0) if formations else np.zeros(members, bool)
-    failures = np.column_stack([bad.any(axis=0), (stats[kn.SINGULAR] > 0).any(axis=0),
+    singular = (stats[kn.SINGULAR] > 0) | (stats[kn.SIN_CROSSINGS] > 0)   # (an l–l singularity crossed between samples)
+    failures = np.column_stack([bad.any(axis=0), singular.any(axis=0),
                                 (saturated > saturation_share).any(axis=0), collision])
     return {"metrics": metrics, "failures": failures}
 
