@@ -130,8 +130,10 @@ def test_table_rows_are_the_feedforward_formulas_bit_for_bit():
                                   ddy.reshape(40, 100), direction)
         assert theta.shape == (40, 100) and v.tobytes() == expected[:, 8].tobytes()
         assert theta.ravel().tobytes() == expected[:, 7].tobytes() and w.ravel().tobytes() == omega.tobytes()
-    theta, v, w = feedforward(3.0, 4.0, 0.0, 1.0)   # scalars broadcast
-    assert (float(theta), float(v), float(w)) == (np.arctan2(4.0, 3.0), 5.0, 3.0 / 25.0)
+    theta, v, w = feedforward(3.0, 4.0, 0.0, 1.0)   # scalars give scalars
+    assert np.ndim(theta) == 0 and (theta, v, w) == (np.arctan2(4.0, 3.0), 5.0, 3.0 / 25.0)
+    with pytest.raises(ValueError, match="flat outputs"):   # never read past the arrays
+        table_rows(np.arange(5.0), flat[:, :3])
 
 
 def test_formula_tables_take_sin_and_cos_of_each_argument_once():

@@ -191,6 +191,30 @@ def test_wedge_is_nearly_singular_and_reported():
     assert fine.follower_metrics("F")["safety"]["sin_gamma_sign_changes"] == 0
 
 
+def test_sign_changes_through_exact_zeros_are_counted():
+    """sin(γ1 − γ2) of −, 0, +, 0, −, − over six samples: two passages through the singular
+    configuration, each through a sample where it is exactly 0 (scored by the kernel's
+    statistics code from given states, as a fleet's run is)."""
+    from nonholo.sim import kernel as kn
+    from nonholo.sim.scenario import Follower, Robot, Scenario
+    from nonholo.sim.simulator import planned_groups, score_states
+
+    leader = Robot("L", controller("dynamic-feedback"), (0.0, 0.0, 0.0))
+    r2 = Follower("R2", "separation-bearing", ("L",), targets=(2.0, 3.0), start=(2.0, 0.0, 0.0))
+    f = Follower("F", "separation-separation", ("L", "R2"), targets=(3.0, 3.0), d=0.5, start=(-3.0, 0.1, 0.0))
+    ys = [0.1, 0.0, -0.1, -0.0, 0.1, 0.2]   # F's castor point above, on, below… the line through L and R2
+    scenario = Scenario(references.line(), [leader, r2, f], duration=0.01 * (len(ys) - 1), dt=0.01,
+                        control_period=0.01)
+    states = np.zeros((len(ys), 4, 3))
+    states[:, 0, 1] = 2.0
+    states[:, 0, 2], states[:, 1, 2] = -3.0, ys
+    result = score_states(scenario, planned_groups(scenario), states, np.zeros((len(ys), kn.HELD_COUNT, 3)), 0.0)
+    signs = np.sign(result.record[kn.REC_SIN_GAMMA, :, 2, 0])
+    assert signs.tolist() == [-1.0, 0.0, 1.0, 0.0, -1.0, -1.0]
+    safety = result.follower_metrics("F")["safety"]
+    assert safety["sin_gamma_sign_changes"] == 2 and safety["min_abs_sin_gamma_difference"] == 0.0
+
+
 def test_collinear_start_is_flagged_singular():
     leader = Leader("leader", controller("dynamic-feedback", kp=1.0, kd=0.7), start=(0.0, 0.0, 0.0))
     r2 = separation_bearing("R2", "leader", 3.0, math.pi, start=(-4.0, 0.0, 0.0))

@@ -121,6 +121,44 @@ def test_divergence_is_a_counted_failure_not_an_abort():
         nh.simulate(nh.parse_scenario(UNSTABLE.replace("name = \"r\"", "name = \"r\"\nstart = [3, 0, 0]")))
 
 
+WEDGE = """
+name = "wedge"
+[simulation]
+duration = 8.0
+dt = 0.01
+[reference]
+kind = "circle"
+[[robots]]
+name = "leader"
+controller = "dynamic-feedback"
+gains = { kp = 1.0, kd = 0.7, xi0 = 0.5 }
+start = [0.0, 0.0, 1.5707963267948966]
+[[robots]]
+name = "R2"
+formation = "separation-bearing"
+leader = "leader"
+l = 3.605551275463989
+phi = "atan2(-2*sqrt(3), 1)"
+start_relative = [-1.0, -4.0, 0.0]
+[[robots]]
+name = "F"
+formation = "separation-separation"
+leaders = ["leader", "R2"]
+l = [2.0, 2.0]
+start_relative = [-3.0, -2.0, 0.0]
+"""
+
+
+def test_an_l_l_singularity_crossed_between_samples_is_a_singular_failure():
+    # the spec's wedge passes through sin(γ1 − γ2) = 0 at t = 7.25 s between two samples, where
+    # no guard acts (|sin| stays above sin_floor at every sample): counted as singular all the same
+    result = run_montecarlo(WEDGE, ["F.gains.k1=uniform(0.99, 1.01)"], 3, seed=0, progress=False)
+    assert result.failure_summary()["singular"]["count"] == 3
+    scenario = nh.parse_scenario(WEDGE)
+    safety = nh.simulate(scenario).follower_metrics("F")["safety"]
+    assert safety["singular_samples"] == 0 and safety["sin_gamma_sign_changes"] >= 1
+
+
 def test_collision_closer_than_two_d_and_worst_files_rerun(tmp_path):
     result = run_montecarlo(FORMATION, ["f1.l=uniform(0.6, 3.0)", "f1.start.y=normal(0, 0.3)"], 24, seed=1,
                             out=tmp_path, worst=2, worst_by="f1.error_max", progress=False)

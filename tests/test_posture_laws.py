@@ -132,6 +132,10 @@ def test_posture_formations_are_integrated_from_the_goal_and_recorded_in_the_wor
     assert np.allclose(moved, near.record[[kn.REC_X, kn.REC_Y]], rtol=0, atol=2e-11)
     assert np.array_equal(near.substeps, far.substeps)
     assert np.allclose(near.stats[:kn.ROBOT_STATS], far.stats[:kn.ROBOT_STATS], rtol=1e-9, atol=1e-12)
+    # starts that the move to the goal and back would round are recorded as given
+    odd = dataclasses.replace(root, start=(0.1, 0.2, 0.0), goal=(0.7, 0.3, 0.0))
+    first = simulate(dataclasses.replace(polar, robots=(odd,), duration=1.0)).record[:3, 0, 0, 0]
+    assert first.tolist() == [0.1, 0.2, 0.0]
     # the study's faulty reconstruction measures the distance from the world origin: in world
     # coordinates it hovers near the goal (spec §5.2 (b)); moved by the goal it would converge
     faulty = dataclasses.replace(root, controller=POLAR_WITH_FAULT.configure(dict(root.controller.gains),

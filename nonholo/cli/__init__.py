@@ -71,12 +71,12 @@ def signals_interrupt():
 # and let a first run's peak memory grow by 70 MB: numba's compiler leaves large cycles.)
 # ``main`` sets it only when it parses the process's own arguments, not when called from Python.
 PROGRAM_GC_THRESHOLD = (2_000, 10, 10)
-# And at its exit, once the exit handlers have run, everything still alive is frozen out of
-# the collections that Python's shutdown runs (``gc.freeze``): they would traverse every
-# object of sympy, numba, scipy and matplotlib to free memory that the operating system
-# takes back at once anyway (0.4–0.5 s of every command here). Objects are still freed by
-# their reference counts, files closed, exit handlers run; only objects in reference cycles
-# are left to the operating system.
+# And at its exit, once the exit handlers registered during the command have run, everything
+# still alive is frozen out of the collections that Python's shutdown runs (``gc.freeze``):
+# they would traverse every object of sympy, numba, scipy and matplotlib to free memory that
+# the operating system takes back at once anyway (0.4–0.5 s after a study). Objects are still
+# freed by their reference counts; objects in reference cycles are left to the operating
+# system, their finalizers not run (nonholo closes its files, sockets and processes itself).
 
 
 # Run as the ``nonholo`` program, fresh memory is made cheaper to get (``tune_memory``):
@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     prog = "nonholo"
     if argv is None:   # the program itself (see PROGRAM_GC_THRESHOLD, tune_memory)
         gc.set_threshold(*PROGRAM_GC_THRESHOLD)
-        atexit.register(gc.freeze)   # registered first, so it runs after every other exit handler
+        atexit.register(gc.freeze)   # runs after the exit handlers registered later (by the command)
         tune_memory()
     try:
         try:

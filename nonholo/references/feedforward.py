@@ -47,6 +47,9 @@ def table_rows(t: np.ndarray, flat: np.ndarray, direction: int = 1, rows: np.nda
     flat = np.ascontiguousarray(flat, dtype=float)
     if rows is None:
         rows = np.empty((t.size, len(REF_COLUMNS)))
+    if t.ndim != 1 or flat.shape != (6, t.size) or rows.shape != (t.size, len(REF_COLUMNS)):
+        raise ValueError(f"table_rows: times (n,), flat outputs (6, n) and rows (n, {len(REF_COLUMNS)}) expected, "
+                         f"got {t.shape}, {flat.shape} and {rows.shape}")
     # (s·ẏ_d is exact for s = ±1: the same angles, signed zeros included)
     theta_d = np.arctan2(flat[3], flat[2]) if direction == 1 else np.arctan2(direction * flat[3], direction * flat[2])
     _fill_rows(t, flat, theta_d, direction, rows)
@@ -60,4 +63,4 @@ def feedforward(dx, dy, ddx, ddy, direction: int = 1):
     flat = np.zeros((6, dx.size))
     flat[2:] = [a.ravel() for a in (dx, dy, ddx, ddy)]
     rows = table_rows(np.zeros(dx.size), flat, direction)
-    return tuple(rows[:, column].reshape(dx.shape) for column in (REF_THETA, REF_V, REF_OMEGA))
+    return tuple(rows[:, column].reshape(dx.shape)[()] for column in (REF_THETA, REF_V, REF_OMEGA))

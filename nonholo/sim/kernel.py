@@ -635,10 +635,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         s = abs(signed)
                         stats[MIN_SIN_T, r, b] = t if s < stats[MIN_SIN, r, b] else stats[MIN_SIN_T, r, b]
                         stats[MIN_SIN, r, b] = min(stats[MIN_SIN, r, b], s)
-                        # a sign change from the last sample: sin(γ1 − γ2) went through 0, the
-                        # singular configuration, between two samples (spec §3.2)
+                        # a sign change from the last non-zero sample: sin(γ1 − γ2) went through 0,
+                        # the singular configuration, since then (spec §3.2)
                         stats[SIN_CROSSINGS, r, b] += 1.0 if signed * stats[SIN_LAST, r, b] < 0.0 else 0.0
-                        stats[SIN_LAST, r, b] = signed
+                        stats[SIN_LAST, r, b] = signed if signed != 0.0 else stats[SIN_LAST, r, b]
             if n_robots > 1:
                 for b in range(n_batch):
                     closest, first, second = np.inf, -1, -1

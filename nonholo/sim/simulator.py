@@ -197,7 +197,8 @@ class Group:
 def _structure(robot, index: dict) -> tuple:
     """What copies integrated together must share, for one robot (parents as positions)."""
     if isinstance(robot, Robot):
-        return ("root", robot.controller.law, robot.posture)
+        return ("root", robot.controller.law, robot.posture,
+                robot.posture and robot.controller.controller.goal_relative)
     return (robot.law, tuple(index[p] for p in robot.leaders), repr(robot.changes), robot.targets if robot.changes else None)
 
 
@@ -301,7 +302,8 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         robots = [first.robots[i] for i in component]
         if len(robots) == 1 and isinstance(robots[0], Robot):
             config = robots[0].controller
-            key = (config.law, config.controller.gain_tuple, robots[0].posture,
+            posture = robots[0].posture
+            key = (config.law, config.controller.gain_tuple, posture, posture and config.controller.goal_relative,
                    _prior_rate(robots, v_peak, omega_peak, known))
             if key not in lone:
                 lone[key] = describe(robots)
@@ -559,8 +561,9 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
         if np.all(needed <= plan):
             break
         plan = needed if iteration < iterations - 2 else np.maximum(plan, needed)
-    if shift is not None and record:
+    if shift is not None and record:   # back to world coordinates (rounded there), the starts as given
         records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
+        records[[kn.REC_X, kn.REC_Y], 0] = group.state[:2]
     return stats, pair_stats, records, plan
 
 
