@@ -247,6 +247,7 @@ def link_record(key: str, result: FormationResult, follower: Follower) -> dict:
             "exactness": exactness(result, follower),
             "min_sin": metrics["safety"].get("min_abs_sin_gamma_difference"),
             "min_sin_time": metrics["safety"].get("min_abs_sin_gamma_time"),
+            "sin_sign_changes": metrics["safety"].get("sin_gamma_sign_changes"),
             "peak_v": metrics["safety"]["peak_v"], "peak_v_time": metrics["safety"]["peak_v_time"],
             "peak_omega": metrics["safety"]["peak_omega"]}
 
@@ -287,7 +288,8 @@ def wedge_record(key: str, result: FormationResult) -> dict:
     follower = next(f for f in result.formation.followers if len(f.leaders) == 2)
     link = link_record(key, result, follower)
     return {"case": key, "dt": result.formation.dt, "max_substeps": int(result.substeps.max()),
-            "min_sin": link["min_sin"], "min_sin_time": link["min_sin_time"], "peak_v": link["peak_v"],
+            "min_sin": link["min_sin"], "min_sin_time": link["min_sin_time"],
+            "sin_sign_changes": link["sin_sign_changes"], "peak_v": link["peak_v"],
             "exactness": link["exactness"], "e1_final": link["e1_final"], "e2_final": link["e2_final"],
             **{k: v for k, v in bearing_record(key, result).items() if k.startswith("phi")}}
 
@@ -358,6 +360,7 @@ class FormationStudyResult(TabulatedStudyResult):
                   "ends on (Eq 5.10's 240°/120° or the mirror image 300°/60°) is decided near the singularity",
                   [Column("run", "case"), Column("dt (s)", "dt"), Column("max sub-steps", "max_substeps", terminal=False),
                    Column("min |sin(γ1−γ2)|", "min_sin"), Column("at t (s)", "min_sin_time"),
+                   Column("sign changes of sin(γ1−γ2)", "sin_sign_changes", terminal=False),
                    Column("peak |v| (m/s)", "peak_v", terminal=False),
                    Column("max |e − e0·e^(−kt)| (m)", "exactness", terminal=False),
                    Column("final |l13 − 2|", "e1_final", terminal=False), Column("final |l23 − 2|", "e2_final", terminal=False),
@@ -485,17 +488,22 @@ def _eq_5_10_bearings(result: FormationStudyResult) -> Finding:
                    "bearings are not controlled outputs of the l–l law; 240°/120° at l1 = l2 = 2 are consistent only "
                    "with R2 2√3 m abeam to the right of the leader (errata 23, 24; spec §3.3). Both mirror positions "
                    "satisfy l1 = l2 = 2; F can switch between them only through the collinear, singular geometry, which "
-                   "the wedge grazes at t ≈ 7.25 s, so the side is decided by the integration there.")
+                   "the wedge reaches at t ≈ 7.25 s, so the side is decided by the integration there.")
 
 
 def _ll_singularity(result: FormationStudyResult) -> Finding:
     rows = [result.link(case) for case in ("ll-T1", "ll-T4", "wedge-T4")]
     near = [r for r in rows if r["min_sin"] < NEAR_SINGULAR]
+    crossed = [r for r in rows if r["sin_sign_changes"]]
     return Finding("l–l singularity sin(γ1 − γ2) = 0 (not discussed in the thesis)", "note",
-                   "min |sin(γ1 − γ2)|: " + ", ".join(f"{r['case']} {r['min_sin']:.3f} at t = {r['min_sin_time']:.2f} s"
-                                                     for r in rows)
+                   "min |sin(γ1 − γ2)| over the samples: "
+                   + ", ".join(f"{r['case']} {r['min_sin']:.3f} at t = {r['min_sin_time']:.2f} s" for r in rows)
                    + (f"; nearly singular (< {NEAR_SINGULAR:g}) in {', '.join(r['case'] for r in near)}, where the "
-                      f"follower is asked for up to {max(r['peak_v'] for r in near):.0f} m/s." if near else "."),
+                      f"follower is asked for up to {max(r['peak_v'] for r in near):.0f} m/s" if near else "")
+                   + ("; " + ", ".join(f"{r['case']} passes through it ({r['sin_sign_changes']} sign change(s) of "
+                                       "sin(γ1 − γ2) between samples): the continuous solution ends there, and what "
+                                       "follows depends on how the integration steps over it" for r in crossed)
+                      if crossed else "") + ".",
                    "the decoupling matrix of the l–l law has det = d·sin(γ2 − γ1): F's castor point and the two "
                    "leaders' axle centres become collinear (spec §3.2); Eq 4.62's division by cos γ1 would add a "
                    "second, spurious singularity (erratum 19).")
