@@ -37,6 +37,38 @@ def test_converges_from_perturbed_starts(name, variant):
     assert np.all(result.metrics.error_final < 1e-3), result.metrics.error_final
 
 
+@pytest.mark.parametrize("name", ["approximate-linearization", "nonlinear", "dynamic-feedback"])
+def test_converges_driving_backward(name):
+    """A reference driven backward (spec leader.md §2, s = −1: v_d < 0, θ_d the reversed
+    tangent): from off-path starts the robot reaches it, and drives it backward."""
+    ref = references.circle(direction=-1)
+    starts = [(10.5, 0.3, -1.4), (9.0, -0.5, -2.0)]
+    robots = [Robot(f"r{i}", controller(name), start=s) for i, s in enumerate(starts)]
+    result = simulate(Scenario(ref, robots, duration=120.0, dt=0.01))
+    assert np.all(result.metrics.error_max > 0.4)
+    assert np.all(result.metrics.error_final < 1e-6), result.metrics.error_final
+    assert np.all(result.trajectory("v")[:, -1] < -0.4)   # v_d = −0.5 m/s
+
+
+def test_kanayama_refuses_a_reference_driven_backward(tmp_path, capsys):
+    """Kanayama's law needs v_d > 0 (spec §3.4: its Lyapunov function): driven backward it
+    diverges, so the run is refused with one line (exit 2), before anything is integrated."""
+    from nonholo.cli import main
+    from nonholo.errors import InfeasibleReferenceError
+
+    robot = Robot("r", controller("kanayama"), start=(10.5, 0.3, -1.4))
+    with pytest.raises(InfeasibleReferenceError, match="kanayama controller needs forward motion, v_d > 0"):
+        simulate(Scenario(references.circle(direction=-1), [robot], duration=10.0, dt=0.01))
+    path = tmp_path / "k.toml"
+    path.write_text('[reference]\nkind = "circle"\ndirection = "backward"\n[[robots]]\nname = "r"\n'
+                    'controller = "kanayama"\nstart = [10.5, 0.3, -1.4]\n')
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "driven backward" in err
+    forward = simulate(Scenario(references.circle(), [robot], duration=1.0, dt=0.01))   # forward: runs
+    assert forward.metrics.error_final[0] < 1.0
+
+
 @pytest.mark.parametrize("variant", ["linear", "sine"])
 def test_cascaded_converges_when_omega_d_excites_the_cross_track_error(variant):
     """Spec §3.3: position errors obey λ² + c2 λ + (1 + c3) ω_d²; ω_d = 1 rad/s gives a

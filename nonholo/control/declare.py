@@ -132,6 +132,7 @@ class ControlLaw:
     initial: float | str | None = None
     xi_is_speed: bool = False
     needs_moving_reference: bool = True
+    forward_only: bool = False
     heading_controlled: bool = True
     goal_relative: bool = True
     stiffness: Callable[[Mapping[str, float], float, float], float] = _no_stiffness
@@ -350,8 +351,8 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
                 variant: str = "default", aliases: Mapping[str, tuple[str, ...]] | None = None,
                 state: str | None = None, initial: float | str | None = None, xi_is_speed: bool | None = None,
                 stiffness: Callable[[Mapping[str, float], float, float], float] | None = None,
-                needs_moving_reference: bool | None = None, heading_controlled: bool = True,
-                goal_relative: bool = True):
+                needs_moving_reference: bool | None = None, forward_only: bool = False,
+                heading_controlled: bool = True, goal_relative: bool = True):
     """Register the decorated compiled law under ``name`` (its first variant ``variant``).
 
     ``gains``: name → ``Gain(default, rule)`` in the order the gain tuple takes them;
@@ -361,7 +362,8 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
     gain tuple); ``xi_is_speed``: ξ is a speed, so |ξ̇/ξ| is a rate (default: True for the
     speed-like initial rules); ``stiffness(gains, v_d_max, omega_d_max)``: the fastest
     closed-loop rate (1/s); ``needs_moving_reference`` (default: True for tracking laws):
-    the law needs v_d ≠ 0; ``heading_controlled`` (posture laws): the final heading is
+    the law needs v_d ≠ 0; ``forward_only`` (tracking laws): the law needs v_d > 0, and a
+    reference driven backward is refused; ``heading_controlled`` (posture laws): the final heading is
     regulated; ``goal_relative`` (posture laws): the law reads the pose only relative to its
     goal, as the spec's laws do (``goal_frame_pose``), so the simulator may integrate it with
     the goal as origin (full precision near the goal); False for a law that reads the world
@@ -428,8 +430,9 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
         if not (rate >= 0.0):
             _fail(name, f"stiffness must be a rate >= 0 (1/s), got {rate!r} on the default gains")
         moving = kind == "tracking" if needs_moving_reference is None else bool(needs_moving_reference)
-        if kind == "posture" and moving:
-            _fail(name, "a posture law does not read the reference: needs_moving_reference must be False")
+        if kind == "posture" and (moving or forward_only):
+            _fail(name, "a posture law does not read the reference: needs_moving_reference and forward_only must "
+                        "be False")
         if xi_is_speed is None:  # ξ(0) = v_d(0) or a kick speed: ξ is a speed
             speed = initial_rule == REFERENCE_SPEED or initial_gain is not None
         else:
@@ -442,7 +445,7 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
             rules=MappingProxyType({g: d.rule for g, d in gains.items() if d.rule is not ANY}),
             gain_tuple=_gain_tuple(name, fields, function.py_func.__module__),
             aliases=MappingProxyType(alias_map), state=state, initial=initial_rule, xi_is_speed=speed,
-            needs_moving_reference=moving, heading_controlled=bool(heading_controlled),
+            needs_moving_reference=moving, forward_only=bool(forward_only), heading_controlled=bool(heading_controlled),
             goal_relative=bool(goal_relative), stiffness=law_stiffness)
         LAWS[name] = spec
         _BY_KIND[kind][name] = spec

@@ -242,6 +242,10 @@ def _reference_survey(scenario: Scenario):
     survey = scenario.reference.table(np.linspace(0.0, scenario.duration, SURVEY_POINTS))
     _check_finite(scenario, survey)
     for spec in {r.controller.name: r.controller.controller for r in scenario.roots if not r.posture}.values():
+        if spec.forward_only and scenario.reference.direction < 0:
+            raise InfeasibleReferenceError(
+                f"the {spec.name} controller needs forward motion, v_d > 0 ({spec.source}), and this reference is "
+                "driven backward: use direction = \"forward\" or another controller")
         if spec.needs_moving_reference:
             speed = np.abs(survey[:, REF_V])
             if speed.min() < 1e-3 * max(1.0, speed.max()):
