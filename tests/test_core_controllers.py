@@ -57,7 +57,7 @@ def test_kanayama_refuses_a_reference_driven_backward(tmp_path, capsys):
     from nonholo.errors import InfeasibleReferenceError
 
     robot = Robot("r", controller("kanayama"), start=(10.5, 0.3, -1.4))
-    with pytest.raises(InfeasibleReferenceError, match="kanayama controller needs forward motion, v_d > 0"):
+    with pytest.raises(InfeasibleReferenceError, match="kanayama controller follows forward motion only"):
         simulate(Scenario(references.circle(direction=-1), [robot], duration=10.0, dt=0.01))
     path = tmp_path / "k.toml"
     path.write_text('[reference]\nkind = "circle"\ndirection = "backward"\n[[robots]]\nname = "r"\n'
@@ -67,6 +67,39 @@ def test_kanayama_refuses_a_reference_driven_backward(tmp_path, capsys):
     assert err.count("\n") == 0 and "driven backward" in err
     forward = simulate(Scenario(references.circle(), [robot], duration=1.0, dt=0.01))   # forward: runs
     assert forward.metrics.error_final[0] < 1.0
+
+
+def test_offset_point_follows_the_direction_its_point_leads():
+    """The offset-point law's heading is internal dynamics, ė3 ≈ −(v_d/d) sin e3: d < 0 tracks a
+    reference driven backward (to 1e-6 m, heading too, driving backward); d > 0 there, or
+    d < 0 forward, would turn the robot around, and is refused with one line."""
+    from nonholo.errors import InfeasibleReferenceError
+
+    backward, forward = references.circle(direction=-1), references.circle()
+    robot = Robot("r", controller("offset-point", d=-0.5), start=(10.5, 0.3, -1.4))
+    result = simulate(Scenario(backward, [robot], duration=120.0, dt=0.01))
+    assert result.metrics.error_max[0] > 0.4 and result.metrics.error_final[0] < 1e-6
+    assert abs(result.heading_metrics("r")["final"]) < 1e-6
+    assert result.trajectory("v")[0, -1] < -0.4
+    for d, reference, way in ((0.5, backward, "forward"), (-0.5, forward, "backward")):
+        with pytest.raises(InfeasibleReferenceError, match=f"with d = {d:g}, k1 = 1, k2 = 1 follows {way} motion only"):
+            simulate(Scenario(reference, [Robot("r", controller("offset-point", d=d), start=(10.5, 0.3, 1.7))],
+                              duration=1.0, dt=0.01))
+
+
+def test_a_law_declares_the_directions_it_follows():
+    from nonholo.control.declare import POSITIVE, ControllerDeclarationError, Gain, control_law
+    from nonholo.control.registry import LAWS
+
+    for direction in (2, True, lambda g: 0.5, lambda g: g["missing"]):
+        with pytest.raises(ControllerDeclarationError, match="direction"):
+            @control_law("test-direction-law", title="t", source="s", gains={"k": Gain(1.0, POSITIVE)},
+                         direction=direction)
+            def law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):   # pragma: no cover - refused first
+                return 0.0, 0.0, 0.0, 0.0
+    assert "test-direction-law" not in LAWS
+    assert controller("kanayama").direction_of() == 1 and controller("nonlinear").direction_of() == 0
+    assert controller("offset-point", d=-0.2).direction_of() == -1
 
 
 @pytest.mark.parametrize("variant", ["linear", "sine"])

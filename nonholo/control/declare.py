@@ -132,7 +132,7 @@ class ControlLaw:
     initial: float | str | None = None
     xi_is_speed: bool = False
     needs_moving_reference: bool = True
-    forward_only: bool = False
+    direction: int | Callable[[Mapping[str, float]], int] = 0
     heading_controlled: bool = True
     goal_relative: bool = True
     stiffness: Callable[[Mapping[str, float], float, float], float] = _no_stiffness
@@ -217,6 +217,12 @@ class ControllerConfig:
         law's ``py_func`` from Python."""
         head = () if self.controller.kind == "tracking" else tuple(float(v) for v in goal)
         return self.controller.gain_tuple(*head, *(self.gains[g] for g in self.controller.gains))
+
+    def direction_of(self) -> int:
+        """The direction of motion this configuration can follow: +1 forward only, −1
+        backward only, 0 both (the law's declared ``direction``, evaluated at these gains)."""
+        rule = self.controller.direction
+        return int(rule(self.gains)) if callable(rule) else rule
 
     def stiffness(self, v_d_max: float, omega_d_max: float) -> float:
         """The fastest closed-loop rate (1/s) the law can command; sets sub-stepping."""
@@ -351,7 +357,7 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
                 variant: str = "default", aliases: Mapping[str, tuple[str, ...]] | None = None,
                 state: str | None = None, initial: float | str | None = None, xi_is_speed: bool | None = None,
                 stiffness: Callable[[Mapping[str, float], float, float], float] | None = None,
-                needs_moving_reference: bool | None = None, forward_only: bool = False,
+                needs_moving_reference: bool | None = None, direction: int | Callable = 0,
                 heading_controlled: bool = True, goal_relative: bool = True):
     """Register the decorated compiled law under ``name`` (its first variant ``variant``).
 
@@ -362,8 +368,10 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
     gain tuple); ``xi_is_speed``: ξ is a speed, so |ξ̇/ξ| is a rate (default: True for the
     speed-like initial rules); ``stiffness(gains, v_d_max, omega_d_max)``: the fastest
     closed-loop rate (1/s); ``needs_moving_reference`` (default: True for tracking laws):
-    the law needs v_d ≠ 0; ``forward_only`` (tracking laws): the law needs v_d > 0, and a
-    reference driven backward is refused; ``heading_controlled`` (posture laws): the final heading is
+    the law needs v_d ≠ 0; ``direction`` (tracking laws): the direction of motion the law can
+    follow, +1 forward only (v_d > 0), −1 backward only, 0 both (default), or a function of the
+    gains giving one of these; a reference driven the other way is refused (``direction_of``);
+    ``heading_controlled`` (posture laws): the final heading is
     regulated; ``goal_relative`` (posture laws): the law reads the pose only relative to its
     goal, as the spec's laws do (``goal_frame_pose``), so the simulator may integrate it with
     the goal as origin (full precision near the goal); False for a law that reads the world
@@ -430,9 +438,16 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
         if not (rate >= 0.0):
             _fail(name, f"stiffness must be a rate >= 0 (1/s), got {rate!r} on the default gains")
         moving = kind == "tracking" if needs_moving_reference is None else bool(needs_moving_reference)
-        if kind == "posture" and (moving or forward_only):
-            _fail(name, "a posture law does not read the reference: needs_moving_reference and forward_only must "
-                        "be False")
+        if kind == "posture" and (moving or direction != 0):
+            _fail(name, "a posture law does not read the reference: needs_moving_reference must be False and "
+                        "direction 0")
+        try:
+            follows = direction(MappingProxyType(defaults)) if callable(direction) else direction
+        except Exception as exc:  # noqa: BLE001 - reported as a declaration error
+            _fail(name, f"direction fails on the default gains: {type(exc).__name__}: {exc}")
+        if isinstance(follows, bool) or follows not in (-1, 0, 1):
+            _fail(name, f"direction must be +1 (forward only), -1 (backward only), 0 (both) or a function of the "
+                        f"gains giving one of these, got {follows!r}")
         if xi_is_speed is None:  # ξ(0) = v_d(0) or a kick speed: ξ is a speed
             speed = initial_rule == REFERENCE_SPEED or initial_gain is not None
         else:
@@ -445,7 +460,7 @@ def control_law(name: str, *, title: str, source: str, gains: Mapping[str, Gain]
             rules=MappingProxyType({g: d.rule for g, d in gains.items() if d.rule is not ANY}),
             gain_tuple=_gain_tuple(name, fields, function.py_func.__module__),
             aliases=MappingProxyType(alias_map), state=state, initial=initial_rule, xi_is_speed=speed,
-            needs_moving_reference=moving, forward_only=bool(forward_only), heading_controlled=bool(heading_controlled),
+            needs_moving_reference=moving, direction=direction, heading_controlled=bool(heading_controlled),
             goal_relative=bool(goal_relative), stiffness=law_stiffness)
         LAWS[name] = spec
         _BY_KIND[kind][name] = spec

@@ -40,6 +40,9 @@ from nonholo.references.feedforward import (REF_DDX, REF_DDY, REF_DX, REF_DY, RE
 @control_law("offset-point", title="Static input-output linearization of an offset point",
              source="thesis §4.8 Eq 4.34-4.38; spec §3.5; De Luca, Oriolo & Vendittelli 2001",
              gains={"d": Gain(0.5, NONZERO), "k1": Gain(1.0, POSITIVE), "k2": Gain(1.0, POSITIVE)},
+             # θ is internal dynamics, ė3 ≈ −(v_d/d) sin e3: stable only with the tracked point
+             # leading, d > 0 forward and d < 0 backward (else the robot turns around)
+             direction=lambda g: 1 if g["d"] > 0 else -1,
              stiffness=lambda g, v_d, omega_d: max(g["k1"], g["k2"], (v_d + abs(g["d"]) * omega_d) / abs(g["d"])))
 @njit(error_model="numpy", fastmath=False)
 def offset_point_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):

@@ -23,7 +23,7 @@ from nonholo.references.feedforward import REF_OMEGA, REF_V
 @control_law("kanayama", title="Stable tracking (linearized error model)",
              source="thesis §4.5 Eq 4.26; spec §3.4; Kanayama, Kimura, Miyazaki & Noguchi 1990",
              gains={"kx": Gain(10.0, POSITIVE), "ky": Gain(0.0064, POSITIVE), "ktheta": Gain(0.16, POSITIVE)},
-             forward_only=True,   # its Lyapunov function needs v_d > 0 (spec §3.4): backward, it diverges
+             direction=1,   # its Lyapunov function needs v_d > 0 (spec §3.4): backward, it diverges
              stiffness=lambda g, v_d, omega_d: max(g["kx"], v_d * (math.sqrt(g["ky"]) + g["ktheta"])))
 @njit(error_model="numpy", fastmath=False)
 def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):

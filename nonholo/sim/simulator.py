@@ -241,11 +241,17 @@ def _reference_survey(scenario: Scenario):
         return 0.0, 0.0
     survey = scenario.reference.table(np.linspace(0.0, scenario.duration, SURVEY_POINTS))
     _check_finite(scenario, survey)
-    for spec in {r.controller.name: r.controller.controller for r in scenario.roots if not r.posture}.values():
-        if spec.forward_only and scenario.reference.direction < 0:
+    for config in {id(r.controller): r.controller for r in scenario.roots if not r.posture}.values():
+        follows = config.direction_of()
+        if follows and follows != scenario.reference.direction:
+            way = "forward" if follows > 0 else "backward"
+            gains = "" if not callable(config.controller.direction) else \
+                " with " + ", ".join(f"{name} = {value:g}" for name, value in config.gains.items())
             raise InfeasibleReferenceError(
-                f"the {spec.name} controller needs forward motion, v_d > 0 ({spec.source}), and this reference is "
-                "driven backward: use direction = \"forward\" or another controller")
+                f"the {config.name} controller{gains} follows {way} motion only ({config.controller.source}), and "
+                f"this reference is driven {'backward' if follows > 0 else 'forward'}: see "
+                f"docs/controllers/{config.name}.md")
+    for spec in {r.controller.name: r.controller.controller for r in scenario.roots if not r.posture}.values():
         if spec.needs_moving_reference:
             speed = np.abs(survey[:, REF_V])
             if speed.min() < 1e-3 * max(1.0, speed.max()):
