@@ -239,9 +239,8 @@ def _reference_survey(scenario: Scenario):
     """Peak |v_d|, |ω_d| of the reference, and its rows checked finite (None without one)."""
     if scenario.reference is None:
         return 0.0, 0.0
-    survey = scenario.reference.table(np.linspace(0.0, scenario.duration, SURVEY_POINTS))
-    _check_finite(scenario, survey)
-    for config in {id(r.controller): r.controller for r in scenario.roots if not r.posture}.values():
+    configs = {id(r.controller): r.controller for r in scenario.roots if not r.posture}.values()
+    for config in configs:   # (refused before any table is computed)
         follows = config.direction_of()
         if follows and follows != scenario.reference.direction:
             way = "forward" if follows > 0 else "backward"
@@ -251,7 +250,9 @@ def _reference_survey(scenario: Scenario):
                 f"the {config.name} controller{gains} follows {way} motion only ({config.controller.source}), and "
                 f"this reference is driven {'backward' if follows > 0 else 'forward'}: see "
                 f"docs/controllers/{config.name}.md")
-    for spec in {r.controller.name: r.controller.controller for r in scenario.roots if not r.posture}.values():
+    survey = scenario.reference.table(np.linspace(0.0, scenario.duration, SURVEY_POINTS))
+    _check_finite(scenario, survey)
+    for spec in {config.name: config.controller for config in configs}.values():
         if spec.needs_moving_reference:
             speed = np.abs(survey[:, REF_V])
             if speed.min() < 1e-3 * max(1.0, speed.max()):
@@ -312,8 +313,7 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         robots = [first.robots[i] for i in component]
         if len(robots) == 1 and isinstance(robots[0], Robot):
             config = robots[0].controller
-            posture = robots[0].posture
-            key = (config.law, config.controller.gain_tuple, posture, posture and config.controller.goal_relative,
+            key = (config.controller.gain_tuple, _structure(robots[0], {}),
                    _prior_rate(robots, v_peak, omega_peak, known))
             if key not in lone:
                 lone[key] = describe(robots)
