@@ -75,3 +75,23 @@ def test_non_affine_model_is_rejected():
     u, x = sp.symbols("u x")
     with pytest.raises(ValueError, match="not affine"):
         control_affine_from_rates([u ** 2, x], [u])
+
+
+@pytest.mark.parametrize("omega", [0.7, -1.3, 1e-12, 0.0])
+def test_unicycle_arc_is_the_exact_solution_of_the_model(omega):
+    """``unicycle_arc`` (the pose after h s under constant v, ω) against a fine RK4
+    integration of ``unicycle_rates``; h = 0 returns the pose itself, bit for bit."""
+    from nonholo.models.unicycle import unicycle_arc
+
+    x, y, theta, v, h = 1.5, -2.0, 0.4, 0.9, 2.5
+    q = np.array([x, y, theta])
+    rates = lambda q: np.array(unicycle_rates.py_func(v, omega, np.cos(q[2]), np.sin(q[2])))  # noqa: E731
+    steps = 2000
+    for _ in range(steps):
+        k1 = rates(q)
+        k2 = rates(q + 0.5 * h / steps * k1)
+        k3 = rates(q + 0.5 * h / steps * k2)
+        k4 = rates(q + h / steps * k3)
+        q = q + h / steps / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    assert np.allclose(unicycle_arc(x, y, theta, v, omega, h), q, rtol=0, atol=1e-12)
+    assert unicycle_arc(x, y, theta, v, omega, 0.0) == (x, y, theta)

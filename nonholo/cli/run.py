@@ -50,7 +50,10 @@ def handle(args: argparse.Namespace) -> int:
 
         # [network]: its link model applies here as in a lockstep fleet (it needs control_period);
         # the whole table is checked as `nonholo fleet` checks it (a misspelt field is not ignored).
-        check_network([scenario])
+        try:
+            check_network([scenario])
+        except NonholoInputError as exc:   # a problem of the file: name it, as the reader does
+            raise NonholoInputError(f"{source}: network: {exc}") from None
         from nonholo.fleet.config import load_fleet
 
         load_fleet(source)
@@ -178,7 +181,8 @@ def format_summary(summary: dict) -> str:
         w = links["watchdog"]
         overrides = f", {len(links['links'])} link(s) overridden" if links["links"] else ""
         notes.append(f"link model (seed {links['seed']}): delay {links['delay']:g} s + jitter up to {links['jitter']:g} "
-                     f"s, loss {links['loss']:g}{overrides}; watchdog stops a follower beyond {w['stale_after']:g} s")
+                     f"s, loss {links['loss']:g}{overrides}; watchdog stops a follower beyond {w['stale_after']:g} s"
+                     + ("; parents' states predicted over their age" if links.get("predict") else ""))
     lines += notes
     lines.append("errors on the uniform output grid; peak v in m/s, peak w in rad/s")
     # long names and notes wrap (continuation lines indented): the terminal output fits 100 columns

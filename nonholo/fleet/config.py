@@ -16,7 +16,7 @@ delays (in control periods: a lockstep robot's inboxes are bounded).
     resume_after = 3
     decel_v = 2.0
     decel_omega = 8.0
-    predict = false                # realtime: extrapolate the parent's state over its age
+    predict = false                # advance each parent's state along its arc over the state's age
     failover = false               # realtime: the leader's successor takes over when it is lost
     order = ["leader", "f1"]       # the leader, then its successor (a direct l-phi follower)
     failover_after = 0.3           # s of the leader's silence before the successor takes over
@@ -43,7 +43,7 @@ from nonholo.tomlfile import describe_value, read_toml
 
 TRANSPORTS = ("tcp", "zenoh", "inproc")
 MODES = ("lockstep", "realtime")   # logical time, or the wall clock
-FIELDS = {"transport", "keys", "predict", "addresses", "failover", "order", "failover_after", *link_fields.FIELDS}
+FIELDS = {"transport", "keys", "addresses", "failover", "order", "failover_after", *link_fields.FIELDS}
 MAX_DELAY_PERIODS = 24   # delay + jitter, in control periods (bounded lockstep inboxes)
 
 
@@ -68,7 +68,7 @@ class NetworkConfig:
     def link_settings(self) -> LinkSettings | None:
         """The link model as the centralized simulator takes it (``Scenario.network``;
         None when every link is ideal)."""
-        settings = LinkSettings(self.seed, self.default, tuple(self.links.items()), self.watchdog)
+        settings = LinkSettings(self.seed, self.default, tuple(self.links.items()), self.watchdog, self.predict)
         return None if settings.ideal else settings
 
 
@@ -118,9 +118,7 @@ def network_config(data, scenario: Scenario, source: str = "<scenario>") -> Netw
     for i, (_, model) in enumerate(settings.links):
         f.bound_delay(model, f"network.links[{i}]", period)
     seed, watchdog, default, links = settings.seed, settings.watchdog, settings.default, dict(settings.links)
-    predict = data.get("predict", False)
-    if not isinstance(predict, bool):
-        f.fail("network.predict", f"expected true or false, got {describe_value(predict)}")
+    predict = settings.predict
     names = set(scenario.names)
     addresses = f.table(data.get("addresses", {}), "network.addresses", names)
     for name, address in addresses.items():

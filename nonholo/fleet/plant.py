@@ -8,13 +8,13 @@ over output step k on logical time; a real plant moves by itself.
 """
 from __future__ import annotations
 
-import math
 import time
 from typing import Callable, Protocol
 
 import numpy as np
 
 from nonholo.fleet.step import plant_steps
+from nonholo.models.unicycle import unicycle_arc
 
 
 class Plant(Protocol):
@@ -43,18 +43,6 @@ class SimulatedUnicycle:
 
     def advance(self, k: int) -> None:
         self._hold(self._pose, self.v, self.omega, self.dt, int(self.plan[k]))
-
-
-def unicycle_arc(x: float, y: float, theta: float, v: float, omega: float,
-                 h: float) -> tuple[float, float, float]:
-    """The unicycle's exact pose after ``h`` seconds under constant (v, ω): an arc, or a
-    segment when ω is (almost) zero."""
-    if abs(omega * h) < 1e-9:
-        mid = theta + 0.5 * omega * h
-        return x + v * h * math.cos(mid), y + v * h * math.sin(mid), theta + omega * h
-    turned = theta + omega * h
-    radius = v / omega
-    return x + radius * (math.sin(turned) - math.sin(theta)), y - radius * (math.cos(turned) - math.cos(theta)), turned
 
 
 class WallClockUnicycle:

@@ -173,7 +173,7 @@ async def run_program(program: RobotProgram, mode: str, config: NetworkConfig, o
     if mode == "realtime":
         await program.run_realtime(predict=config.predict, on_start=on_start)
     else:
-        await program.run_lockstep()
+        await program.run_lockstep(predict=config.predict)
 
 
 def write_trace(path, program: RobotProgram) -> None:

@@ -25,6 +25,7 @@ from nonholo.fleet import messages as msg
 from nonholo.sim.links import IDEAL, link_draws, link_schedule
 from nonholo.fleet.setup import BEARING, PAIR, ROOT, RobotSetup
 from nonholo.fleet.step import follower_steps, plant_steps, root_step
+from nonholo.models.unicycle import unicycle_arc
 from nonholo.sim.watchdog import FOLLOWING, WatchdogConfig, WatchdogState, watchdog_step
 from nonholo.sim import kernel as kn
 
@@ -129,6 +130,7 @@ class RobotProgram:
         # a parent runs at most WINDOW instants ahead of this robot's acknowledged progress).
         self.inbox: dict[str, deque] = {p: deque(maxlen=PARENT_STATES) for p in setup.parents}
         self.latest: dict[str, msg.RobotState] = {}
+        self.predict = False   # lockstep: parents' messages advanced over their age (run_lockstep)
         self.subscribers: set[str] = set()
         self.agreed: set[str] = set()
         self.progress = {child: -1 for child in setup.children}
@@ -310,6 +312,11 @@ class RobotProgram:
             used = (instant - self.latest[parent].k // s.hold_every) * period
             self.ages[parent][instant] = used
             age = max(age, used)
+            if self.predict:   # the message's pose advanced along its command's arc over its age (§3)
+                state = self.latest[parent]
+                self.latest[parent] = msg.RobotState(state.robot, state.k, state.seq, state.t,
+                                                     *unicycle_arc(state.x, state.y, state.theta, state.v, state.omega,
+                                                                   used), state.v, state.omega)
         return age, new
 
     def _ready(self, instant: int) -> bool:
@@ -322,8 +329,11 @@ class RobotProgram:
                 return False
         return True
 
-    async def run_lockstep(self) -> None:
-        """The whole run on logical time; fills ``states`` and ``helds``."""
+    async def run_lockstep(self, predict: bool = False) -> None:
+        """The whole run on logical time; fills ``states`` and ``helds``. With ``predict`` a
+        parent's message is used advanced along its command's arc over its age, as the
+        centralized simulator does (``nonholo.sim.linkstep``)."""
+        self.predict = predict
         self._replies: list = []
         receiver = asyncio.ensure_future(self._receive())
         try:
@@ -423,7 +433,6 @@ class RobotProgram:
         every control period; the plant moves by itself between commands; a follower uses
         its parents' newest states (zero-order hold, or with ``predict`` extrapolated along
         the exact arc over their age) under the watchdog, and resubscribes to a silent parent."""
-        from nonholo.fleet.plant import unicycle_arc
 
         self.realtime = True
         self._replies = []

@@ -11,6 +11,8 @@ with sympy expressions for symbolic analysis (``unicycle_rates.py_func``).
 """
 from __future__ import annotations
 
+import math
+
 from numba import njit
 
 STATES = ("x", "y", "theta")
@@ -21,3 +23,17 @@ INPUTS = ("v", "omega")
 def unicycle_rates(v, omega, cos_theta, sin_theta):
     """(ẋ, ẏ, θ̇) of the unicycle for inputs (v, ω) at heading θ."""
     return v * cos_theta, v * sin_theta, omega
+
+
+# IEEE arithmetic (no fast-math): the simulator's link step and the robot programs call it
+# alike, and their runs must be equal (spec fleet.md §6).
+@njit(cache=True, error_model="numpy")
+def unicycle_arc(x, y, theta, v, omega, h):
+    """The unicycle's exact pose after ``h`` seconds under constant (v, ω): an arc, or a
+    segment when ω h is (almost) zero. ``h`` = 0 gives the pose itself, bit for bit."""
+    if abs(omega * h) < 1e-9:
+        mid = theta + 0.5 * omega * h
+        return x + v * h * math.cos(mid), y + v * h * math.sin(mid), theta + omega * h
+    turned = theta + omega * h
+    radius = v / omega
+    return x + radius * (math.sin(turned) - math.sin(theta)), y - radius * (math.cos(turned) - math.cos(theta)), turned

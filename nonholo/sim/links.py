@@ -13,7 +13,9 @@ Message j of a link is the parent's state of control instant j (t_j = j T). Its 
 ``k = j + ceil(delay_j / T − 1e-9)`` (the tolerance keeps a delay of exactly 2T at two
 instants despite rounding). Without ``reorder`` a message is never usable before the one
 sent before it (the instant is raised to the previous usable one, as a FIFO link does).
-A lost message is never usable.
+A lost message is never usable. With ``predict`` a follower uses a parent's message advanced
+along the exact unicycle arc of its command over the message's age (spec fleet.md §3,
+``nonholo.models.unicycle.unicycle_arc``).
 """
 from __future__ import annotations
 
@@ -23,11 +25,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from nonholo.sim.watchdog import WatchdogConfig
+from nonholo.sim.watchdog import TICK_TOLERANCE, WatchdogConfig
 from nonholo.tomlfile import describe_value
 
 LOST = -1               # usable instant of a lost message
-TICK_TOLERANCE = 1e-9   # in control periods
 
 
 @dataclass(frozen=True)
@@ -113,20 +114,22 @@ LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
 WATCHDOG_FIELDS = ("stale_after", "resume_after", "decel_v", "decel_omega")
 # The fields of a scenario's [network] table that the link model reads (the fleet reads the
 # rest: transport, keys, addresses, failover, ...).
-FIELDS = ("seed", "links", *LINK_FIELDS, *WATCHDOG_FIELDS)
+FIELDS = ("seed", "links", "predict", *LINK_FIELDS, *WATCHDOG_FIELDS)
 
 
 @dataclass(frozen=True)
 class LinkSettings:
     """The link model of a sampled-data run: ``seed``, ``default`` the model of every link,
     ``links`` per-link overrides as ``((parent, child), LinkModel)`` pairs, ``watchdog`` the
-    followers' watchdog. ``Scenario(network=...)`` carries them; scenarios that differ only
+    followers' watchdog, ``predict`` whether followers advance a parent's message along its
+    arc over the message's age. ``Scenario(network=...)`` carries them; scenarios that differ only
     in them (seed, delay, loss, watchdog) simulate together as one batch."""
 
     seed: int = 0
     default: LinkModel = IDEAL
     links: tuple = ()
     watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
+    predict: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2**63:
@@ -139,6 +142,8 @@ class LinkSettings:
         object.__setattr__(self, "links", links)
         if not isinstance(self.default, LinkModel) or not isinstance(self.watchdog, WatchdogConfig):
             raise ValueError("default must be a LinkModel and watchdog a WatchdogConfig")
+        if not isinstance(self.predict, bool):
+            raise ValueError(f"predict must be true or false, got {self.predict!r}")
 
     def link(self, parent: str, child: str) -> LinkModel:
         return next((model for edge, model in self.links if edge == (parent, child)), self.default)
@@ -146,12 +151,13 @@ class LinkSettings:
     @property
     def ideal(self) -> bool:
         """No delay, jitter or loss on any link: the plain sampled-data run (every state
-        used at its own instant, age 0: the watchdog never acts)."""
+        used at its own instant, age 0: the watchdog never acts and a prediction moves nothing)."""
         return self.default.ideal and all(model.ideal for _, model in self.links)
 
     def describe(self) -> dict:
         return {"seed": int(self.seed), **asdict(self.default),
-                "links": {f"{p}->{c}": asdict(m) for (p, c), m in self.links}, "watchdog": asdict(self.watchdog)}
+                "links": {f"{p}->{c}": asdict(m) for (p, c), m in self.links}, "watchdog": asdict(self.watchdog),
+                "predict": self.predict}
 
 
 def _number(data: dict, key: str, where: str, default: float, high: float, fail) -> float:
@@ -186,8 +192,12 @@ def read_link_settings(data: dict, edges, fail) -> LinkSettings:
     watchdog = WatchdogConfig(_number(data, "stale_after", "network", 0.1, 3600, fail), resume,
                               _number(data, "decel_v", "network", 2.0, 1e6, fail),
                               _number(data, "decel_omega", "network", 8.0, 1e6, fail))
-    if watchdog.stale_after <= 0:
-        fail("network.stale_after", "must be positive")
+    for name in ("stale_after", "decel_v", "decel_omega"):   # (a zero deceleration would never stop)
+        if getattr(watchdog, name) <= 0:
+            fail(f"network.{name}", "must be positive")
+    predict = data.get("predict", False)
+    if not isinstance(predict, bool):
+        fail("network.predict", f"expected true or false, got {describe_value(predict)}")
     default = _link_model(data, "network", IDEAL, fail)
     items = data.get("links", [])
     if not isinstance(items, list):
@@ -211,7 +221,7 @@ def read_link_settings(data: dict, edges, fail) -> LinkSettings:
         if edge in links:
             fail(where, f"link {edge[0]} -> {edge[1]} given twice")
         links[edge] = _link_model(item, where, default, fail)
-    return LinkSettings(seed, default, tuple(links.items()), watchdog)
+    return LinkSettings(seed, default, tuple(links.items()), watchdog, predict)
 
 
 def group_schedules(settings: list, names: list, parents: np.ndarray, instants: int,

@@ -11,8 +11,9 @@ instant, between two calls,
 2. ``link_instant`` (compiled once, for every kernel) goes through the robots parents first:
    a follower takes each parent's message of the instant its link's schedule names
    (``nonholo.sim.links.link_schedule``; age (k − j) T, none yet: age ∞), computes its l–φ
-   or l–l command from those messages (the parent's pose and command at t_j; zero when a
-   parent has delivered nothing yet), passes it through the watchdog
+   or l–l command from those messages (the parent's pose and command at t_j, with
+   ``predict`` the pose advanced along the command's arc over the age, ``unicycle_arc``;
+   zero when a parent has delivered nothing yet), passes it through the watchdog
    (``nonholo.sim.watchdog.watchdog_update``) and holds the result; every robot with
    followers then sends its message of the instant (pose, held command) into a ring of the
    last ``depth`` instants;
@@ -24,7 +25,8 @@ control instants; ``ring`` (5, depth, R, B) the messages (x, y, θ, v, ω) sent;
 ``inbox`` (5, 2, R, B) the message in use per follower and parent slot; ``used`` (2, R, B)
 int64 its index (−1: none yet); ``guard`` (3, R, B) the watchdog's mode (1: stopping),
 its count of fresh states and the l–φ bearing's branch as the follower sees it;
-``watchdog`` (4, B) stale_after, resume_after, decel_v, decel_omega of each copy.
+``watchdog`` (4, B) stale_after, resume_after, decel_v, decel_omega of each copy;
+``predict`` (B,) 1.0 where a copy's followers predict, else 0.0.
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from nonholo.models.formation_geometry import link_geometry
+from nonholo.models.unicycle import unicycle_arc
 from nonholo.numerics import sincos
 from nonholo.sim import kernel as kn
 from nonholo.sim.links import group_schedules
@@ -50,7 +53,7 @@ GUARD_COUNT = 3
 # contraction, so that a follower's command here is bit for bit the robot program's.
 @njit(cache=True, error_model="numpy")
 def link_instant(c, period, state, fields, limits, targets, target_row, offsets, kinds, order, parents, feeds,
-                 sin_floor, instant, held, schedule, ring, inbox, used, guard, watchdog):
+                 sin_floor, instant, held, schedule, ring, inbox, used, guard, watchdog, predict):
     """Control instant ``c`` (see the module docstring): sets ``held`` (HELD_COUNT, R, B) of
     every robot from the roots' commands in ``instant`` and the followers' linked commands."""
     n_batch = state.shape[2]
@@ -87,7 +90,7 @@ def link_instant(c, period, state, fields, limits, targets, target_row, offsets,
                     rate_1, rate_2 = targets[target_row, 2, r], targets[target_row, 3, r]
                     k1, k2, d = fields[kn.K1, r, b], fields[kn.K2, r, b], fields[kn.OFFSET_D, r, b]
                     v_max, omega_max = limits[0, r, b], limits[1, r, b]
-                    px, py, ptheta = inbox[0, 0, r, b], inbox[1, 0, r, b], inbox[2, 0, r, b]
+                    px, py, ptheta = parent_pose(inbox, 0, r, b, (c - used[0, r, b]) * period, predict[b])
                     if kind == kn.SEPARATION_BEARING:
                         # The bearing moves to its branch from the parent's pose in the message
                         # (the robot program's ``bearing`` step).
@@ -99,10 +102,10 @@ def link_instant(c, period, state, fields, limits, targets, target_row, offsets,
                             x, y, theta, px, py, ptheta, inbox[3, 0, r, b], inbox[4, 0, r, b], branch, z1_d, z2_d,
                             rate_1, rate_2, k1, k2, d, v_max, omega_max)
                     else:
+                        qx, qy, qtheta = parent_pose(inbox, 1, r, b, (c - used[1, r, b]) * period, predict[b])
                         v, omega, sat_v, sat_w, singular, _, _, _, _, _, _, _ = kn.pair_command(
-                            x, y, theta, px, py, ptheta, inbox[3, 0, r, b], inbox[0, 1, r, b], inbox[1, 1, r, b],
-                            inbox[2, 1, r, b], inbox[3, 1, r, b], z1_d, z2_d, rate_1, rate_2, k1, k2, d, sin_floor,
-                            v_max, omega_max)
+                            x, y, theta, px, py, ptheta, inbox[3, 0, r, b], qx, qy, qtheta, inbox[3, 1, r, b], z1_d,
+                            z2_d, rate_1, rate_2, k1, k2, d, sin_floor, v_max, omega_max)
                 stopping, fresh, v_out, omega_out, _ = watchdog_update(
                     guard[G_MODE, r, b] != 0.0, int(guard[G_FRESH, r, b]), held[kn.HELD_V, r, b],
                     held[kn.HELD_OMEGA, r, b], age, new, v, omega, watchdog[0, b], int(watchdog[1, b]),
@@ -117,6 +120,17 @@ def link_instant(c, period, state, fields, limits, targets, target_row, offsets,
             if feeds[r] != 0:
                 ring[0, slot_now, r, b], ring[1, slot_now, r, b], ring[2, slot_now, r, b] = x, y, theta
                 ring[3, slot_now, r, b], ring[4, slot_now, r, b] = held[kn.HELD_V, r, b], held[kn.HELD_OMEGA, r, b]
+
+
+@njit(cache=True, error_model="numpy")
+def parent_pose(inbox, slot, r, b, age, predict):
+    """The parent pose a follower uses from its message in ``slot``: as sent, or with
+    ``predict`` (≠ 0) advanced along the arc of the message's command over ``age`` s."""
+    x, y, theta, v, omega = (inbox[0, slot, r, b], inbox[1, slot, r, b], inbox[2, slot, r, b], inbox[3, slot, r, b],
+                             inbox[4, slot, r, b])
+    if predict != 0.0:
+        return unicycle_arc(x, y, theta, v, omega, age)
+    return x, y, theta
 
 
 def linked(group) -> bool:
@@ -153,6 +167,7 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
     for b, links in enumerate(settings):
         # ideal links (None): every state fresh, the watchdog never acts
         watchdog[:, b] = astuple(links.watchdog) if links is not None else (math.inf, 1, 0.0, 0.0)
+    predict = np.array([1.0 if links is not None and links.predict else 0.0 for links in settings])
     ring = np.zeros((MESSAGE, depth, n_robots, n_batch))
     inbox = np.zeros((MESSAGE, 2, n_robots, n_batch))
     used = np.full((2, n_robots, n_batch), -1, dtype=np.int64)
@@ -173,7 +188,7 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
                      group.parents, branch, scenario.sin_floor, instant)
             link_instant(c, period, state, fields, limits, targets, row, group.offsets, group.kinds, group.order,
                          group.parents, group.feeds, scenario.sin_floor, instant, held, schedule, ring, inbox, used,
-                         guard, watchdog)
+                         guard, watchdog, predict)
             k_stop = min(k + every, n_steps)
             # The kernel processes output step k_stop too when it is the last one: stop short of
             # it when it is a control instant (the next pass sets its commands first).

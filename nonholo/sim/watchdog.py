@@ -8,7 +8,8 @@ with the age of the oldest parent state in use (``math.inf`` when a parent has s
 yet), ``new`` whether a state newer than the last one arrived since the previous instant,
 and the law's command. While the parent is stale the command ramps to zero within the
 deceleration limits and holds there; after ``resume_after`` consecutive instants with a new
-state of age ≤ ``stale_after`` the law's command is used again.
+state of age ≤ ``stale_after`` the law's command is used again. An age is stale when it
+exceeds ``stale_after`` by more than ``TICK_TOLERANCE`` control periods (rounding of k·T).
 
 ``watchdog_update`` is the one implementation (compiled, on scalars, so that the
 simulator's compiled link step calls it); ``watchdog_step`` is its form on the dataclasses.
@@ -19,6 +20,11 @@ import math
 from dataclasses import dataclass
 
 from numba import njit
+
+# Times on the control-instant grid are compared with this tolerance, in control periods: an
+# age of three periods, 3 × 0.05 = 0.15000000000000002 s, is not beyond ``stale_after`` = 0.15 s,
+# and a delay of exactly 2T makes a message usable two instants later (``nonholo.sim.links``).
+TICK_TOLERANCE = 1e-9
 
 FOLLOWING, STOPPING = "following", "stopping"
 NO_EVENT, STOP, RESUME = 0, 1, 2          # ``watchdog_update``'s event codes
@@ -54,7 +60,7 @@ def watchdog_update(stopping, fresh, last_v, last_omega, age, new, v, omega, sta
     """One control instant on scalars: ``stopping`` (bool) and ``fresh`` (int) the mode,
     ``last_v``, ``last_omega`` the command last output, ``v``, ``omega`` the law's. Returns
     ``(stopping, fresh, v out, ω out, event)``, event ``NO_EVENT``, ``STOP`` or ``RESUME``."""
-    stale = not age <= stale_after   # NaN and inf are stale
+    stale = not age <= stale_after + TICK_TOLERANCE * period   # NaN and inf are stale
     event = NO_EVENT
     if stale:
         fresh = 0
