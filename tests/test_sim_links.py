@@ -166,7 +166,7 @@ def test_prediction_advances_a_delayed_parent_along_its_arc():
     the exact arc of the parent's command over the message's age. A leader that starts on its
     circle holds the circle's (v_d, ω_d), so its message advanced over any delay is where it
     is: the predicting follower over a delayed link runs as over an ideal one; without
-    prediction it lags. Prediction over ideal links moves nothing (age 0)."""
+    prediction it lags."""
     scenario = parse_scenario(CIRCLE_PAIR)
     ideal = simulate(scenario)
     leader_v = ideal.trajectory("v")[0]
@@ -185,8 +185,12 @@ def test_prediction_advances_a_delayed_parent_along_its_arc():
     for key, value in final(predicting).items():
         assert final(ideal)[key] < value < 1.5 * final(ideal)[key], key
         assert final(lagging)[key] > 500 * final(ideal)[key], key
-    still = simulate(dataclasses.replace(scenario, network=LinkSettings(seed=1, predict=True)))
-    assert np.array_equal(still.trajectory("x"), ideal.trajectory("x"))
+    # a message of age 0 (an ideal link beside delayed ones) is used as sent, predicting or not
+    from nonholo.sim.linkstep import parent_pose
+
+    inbox = np.zeros((5, 2, 1, 1))
+    inbox[:, 0, 0, 0] = (1.25, -0.5, 0.3, 0.9, -0.7)
+    assert parent_pose(inbox, 0, 0, 0, 0.0, 1.0) == parent_pose(inbox, 0, 0, 0, 0.0, 0.0) == (1.25, -0.5, 0.3)
 
 
 @pytest.mark.parametrize("case", ["tree-ll", "chain-7"])
@@ -194,7 +198,10 @@ def test_centralized_prediction_equals_the_lockstep_fleet(case, tmp_path):
     scenario, config = load_fleet(linked_file(tmp_path, case, LINKS + "predict = true\n"), OVERRIDES)
     assert scenario.network.predict and config.predict
     central = simulate(scenario)
-    assert_same_result(central, run_fleet(scenario, "inproc", config=config).result)
+    # the file's [network] config, or (API) none: the scenario's own link model, prediction included
+    fleet = run_fleet(scenario, "inproc", config=config if case == "chain-7" else None)
+    assert fleet.result.to_dict()["simulation"]["link_model"]["predict"]
+    assert_same_result(central, fleet.result)
     plain = simulate(dataclasses.replace(scenario, network=dataclasses.replace(scenario.network, predict=False)))
     assert not np.array_equal(plain.trajectory("x"), central.trajectory("x"))
 

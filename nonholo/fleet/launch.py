@@ -78,7 +78,7 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     if config is None:   # the scenario's own link model (Scenario.network), if any
         links = scenario.network or LinkSettings()
         config = NetworkConfig(transport=transport, seed=links.seed, watchdog=links.watchdog, default=links.default,
-                               links=dict(links.links))
+                               links=dict(links.links), predict=links.predict)
     if scenario.network != config.link_settings:
         # The centralized run the fleet equals plans its sub-steps with the links the robots apply.
         scenario = replace(scenario, network=config.link_settings)

@@ -15,6 +15,8 @@ import math
 
 from numba import njit
 
+from nonholo.numerics import sinc_of
+
 STATES = ("x", "y", "theta")
 INPUTS = ("v", "omega")
 
@@ -29,11 +31,10 @@ def unicycle_rates(v, omega, cos_theta, sin_theta):
 # alike, and their runs must be equal (spec fleet.md §6).
 @njit(cache=True, error_model="numpy")
 def unicycle_arc(x, y, theta, v, omega, h):
-    """The unicycle's exact pose after ``h`` seconds under constant (v, ω): an arc, or a
-    segment when ω h is (almost) zero. ``h`` = 0 gives the pose itself, bit for bit."""
-    if abs(omega * h) < 1e-9:
-        mid = theta + 0.5 * omega * h
-        return x + v * h * math.cos(mid), y + v * h * math.sin(mid), theta + omega * h
-    turned = theta + omega * h
-    radius = v / omega
-    return x + radius * (math.sin(turned) - math.sin(theta)), y - radius * (math.cos(turned) - math.cos(theta)), turned
+    """The unicycle's exact pose after ``h`` seconds under constant (v, ω), in chord form:
+    the chord v h sinc(ω h / 2) along the mean heading θ + ω h / 2 (no cancellation at small
+    ω h, a segment at ω = 0). ``h`` = 0 gives the pose itself."""
+    half = 0.5 * omega * h
+    chord = v * h * sinc_of(half, math.sin(half))
+    mid = theta + half
+    return x + chord * math.cos(mid), y + chord * math.sin(mid), theta + omega * h

@@ -189,12 +189,12 @@ def read_link_settings(data: dict, edges, fail) -> LinkSettings:
     resume = data.get("resume_after", 3)
     if isinstance(resume, bool) or not isinstance(resume, int) or not 1 <= resume <= 1000:
         fail("network.resume_after", f"expected an integer in 1..1000, got {describe_value(resume)}")
-    watchdog = WatchdogConfig(_number(data, "stale_after", "network", 0.1, 3600, fail), resume,
-                              _number(data, "decel_v", "network", 2.0, 1e6, fail),
-                              _number(data, "decel_omega", "network", 8.0, 1e6, fail))
-    for name in ("stale_after", "decel_v", "decel_omega"):   # (a zero deceleration would never stop)
-        if getattr(watchdog, name) <= 0:
+    limits = {}
+    for name, default, high in (("stale_after", 0.1, 3600), ("decel_v", 2.0, 1e6), ("decel_omega", 8.0, 1e6)):
+        limits[name] = _number(data, name, "network", default, high, fail)
+        if limits[name] <= 0:   # (a zero deceleration would never stop)
             fail(f"network.{name}", "must be positive")
+    watchdog = WatchdogConfig(limits["stale_after"], resume, limits["decel_v"], limits["decel_omega"])
     predict = data.get("predict", False)
     if not isinstance(predict, bool):
         fail("network.predict", f"expected true or false, got {describe_value(predict)}")

@@ -189,7 +189,7 @@ class Scenario:
     "solve_ivp" (scipy, tight tolerances, for cross-checks). ``piconet``: one root and at
     most 7 followers. ``sin_floor``: the l–l guard on |sin(γ1 − γ2)|. ``network``: the link
     model of a sampled-data run (``nonholo.sim.links.LinkSettings``: per-link delay, jitter,
-    loss, seed, and the followers' watchdog; spec fleet.md §3–5), applied to the states
+    loss, seed, the followers' watchdog and prediction; spec fleet.md §3–5), applied to the states
     passed from parent to child as a fleet's links do; None (or ideal links): every state is
     used at its own instant.
     """

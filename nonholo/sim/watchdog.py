@@ -38,6 +38,14 @@ class WatchdogConfig:
     decel_v: float = 2.0        # m/s², the most v may fall per second while stopping
     decel_omega: float = 8.0    # rad/s²
 
+    def __post_init__(self) -> None:
+        for name in ("stale_after", "decel_v", "decel_omega"):   # (a zero deceleration would never stop)
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if isinstance(self.resume_after, bool) or not isinstance(self.resume_after, int) or self.resume_after < 1:
+            raise ValueError(f"resume_after must be a positive integer, got {self.resume_after!r}")
+
 
 @dataclass(frozen=True)
 class WatchdogState:
