@@ -9,15 +9,29 @@ package that hides a later editable install (``ImportError: cannot import name
 
 * ``$NUMBA_CACHE_DIR`` if the user set it (numba's own rule, applied to everything), else
 * ``$XDG_CACHE_HOME/nonholo/numba``, or ``~/.cache/nonholo/numba`` (``%LOCALAPPDATA%`` on
-  Windows, ``~/Library/Caches`` on macOS), one sub-folder per source folder (numba names it
-  after the folder and a hash of its absolute path, so two checkouts never share files),
-  else, if that cannot be written, a per-user folder in the temporary directory.
+  Windows, ``~/Library/Caches`` on macOS),
+* else, if that cannot be written, a per-user folder in the temporary directory;
+
+one sub-folder per source folder of the package, named after its path *inside* the package
+(``sim_<hash of "nonholo/sim">``), not after its absolute path: the installed copy and an
+editable checkout of the same source share their compiled code (the README's two commands:
+the tests reuse what the first run compiled).
+
+**Stamp.** numba stamps each function's cache index with a hash of the function's own file
+only, so a caller kept the old code of a compiled helper edited in another module (measured:
+``watchdog_update`` edited, the link step that calls it still ran the old one, even after
+its own file was touched). nonholo's functions are stamped with a digest of the whole
+package's source instead (``package_digest``): an edit anywhere compiles every function
+again when it is next used, and an index written by other source is never loaded. Two
+checkouts of *different* source therefore take turns in one cache folder (each run
+recompiles what the other overwrote): give each its own ``NUMBA_CACHE_DIR`` to keep both warm.
 
 How: numba asks a list of *cache locators*, in order, where a function's cache lives; the
 first that accepts the function wins. ``install()`` (run by ``import nonholo``, before any
-nonholo module compiles anything) inserts ``PackageCacheLocator`` right after numba's
-``$NUMBA_CACHE_DIR`` locator. It accepts only functions whose source file lies inside this
-package, so the user's own ``cache=True`` functions keep numba's defaults, and it works
+nonholo module compiles anything) puts ``PackageCacheLocator`` first, before numba's
+``$NUMBA_CACHE_DIR`` locator (it uses that folder too when it is set). It accepts only
+functions whose source file lies inside this package, so the user's own ``cache=True``
+functions keep numba's defaults, and it works
 whether or not numba was imported first: the locator is chosen when a function is
 decorated, which happens when nonholo's modules are imported, always after
 ``nonholo/__init__`` has run. (Setting ``numba.config.CACHE_DIR`` instead would also move
@@ -31,6 +45,8 @@ True
 """
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 import sys
 import tempfile
@@ -67,8 +83,21 @@ def _fallback_dir() -> Path:
     return Path(tempfile.gettempdir()) / f"nonholo-numba-{user}"
 
 
+@functools.lru_cache(maxsize=None)
+def package_digest() -> bytes:
+    """SHA-256 over every ``.py`` file of the package (its path inside the package and its
+    bytes, in path order): the stamp of every nonholo function's cache index. Once per
+    process (1.2 MB of source, a few ms)."""
+    digest = hashlib.sha256()
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode("utf-8") + b"\0")
+        digest.update(path.read_bytes())
+        digest.update(b"\0")
+    return digest.digest()
+
+
 def _make_locator():
-    from numba.core import caching, config
+    from numba.core import caching
 
     class PackageCacheLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
         """numba cache locator: nonholo's functions cache under ``cache_dir()``."""
@@ -83,10 +112,16 @@ def _make_locator():
         def get_cache_path(self):
             return self._cache_path
 
+        def get_source_stamp(self):
+            return package_digest()
+
+        @classmethod
+        def get_suitable_cache_subpath(cls, py_file):
+            inside = Path(py_file).resolve().parent.relative_to(PACKAGE_DIR.parent).as_posix()   # "nonholo/sim"
+            return f"{inside.rsplit('/', 1)[-1]}_{hashlib.sha1(inside.encode('utf-8')).hexdigest()}"
+
         @classmethod
         def from_function(cls, py_func, py_file):
-            if config.CACHE_DIR:  # the user's choice: numba's own locator (listed before us) handles it
-                return None
             try:
                 if not Path(py_file).resolve().is_relative_to(PACKAGE_DIR):
                     return None
@@ -114,4 +149,4 @@ def install() -> None:
         return
     if any(getattr(c, "__name__", "") == "PackageCacheLocator" for c in locators):
         return
-    locators.insert(1 if locators and "UserProvided" in locators[0].__name__ else 0, _make_locator())
+    locators.insert(0, _make_locator())

@@ -141,3 +141,40 @@ def test_an_edited_law_is_compiled_again_not_served_from_the_cache(tmp_path):
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]
         assert float(done.stdout.split()[-1]) == factor
+
+
+STAMP_PROBE = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    import numpy as np
+    from nonholo.sim.linkstep import parent_pose
+    inbox = np.zeros((5, 2, 1, 1))
+    inbox[:, 0, 0, 0] = (1.0, 0.0, 0.0, 1.0, 0.0)   # x, y, theta, v, omega
+    print(parent_pose(inbox, 0, 0, 0, 2.0, 1.0)[0], sum(parent_pose.stats.cache_hits.values()))
+""")
+
+
+def test_copies_of_one_source_share_compiled_code_and_an_edited_helper_is_not_served_stale(tmp_path):
+    """The cache folder is named after a source folder's place inside the package, so two
+    copies of the same source (the installed one and an editable checkout) share compiled
+    code; every index is stamped with the whole package's source, so editing a compiled
+    helper (``unicycle_arc``, models/unicycle.py) recompiles its caller in another module
+    (``parent_pose``, sim/linkstep.py), which numba's per-file stamp served stale."""
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    copies = []
+    for name in ("installed", "checkout"):
+        shutil.copytree(ROOT / "nonholo", tmp_path / name / "nonholo", ignore=shutil.ignore_patterns("__pycache__"))
+        copies.append(tmp_path / name)
+
+    def probe(copy):
+        done = subprocess.run([sys.executable, "-c", STAMP_PROBE, str(copy)], env=environment, capture_output=True,
+                              text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        x, hits = done.stdout.split()[-2:]
+        return float(x), int(hits)
+
+    assert probe(copies[0]) == (3.0, 0)    # compiled: the pose advanced 2 s at 1 m/s
+    assert probe(copies[1]) == (3.0, 1)    # the other copy loads it
+    helper = copies[1] / "nonholo" / "models" / "unicycle.py"
+    helper.write_text(helper.read_text().replace("return x + v * h * math.cos(mid)", "return 100.0 + x + v * h * math.cos(mid)"))
+    assert probe(copies[1]) == (103.0, 0)   # compiled again with the edited helper
