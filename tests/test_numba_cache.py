@@ -176,5 +176,8 @@ def test_copies_of_one_source_share_compiled_code_and_an_edited_helper_is_not_se
     assert probe(copies[0]) == (3.0, 0)    # compiled: the pose advanced 2 s at 1 m/s
     assert probe(copies[1]) == (3.0, 1)    # the other copy loads it
     helper = copies[1] / "nonholo" / "models" / "unicycle.py"
-    helper.write_text(helper.read_text().replace("return x + v * h * math.cos(mid)", "return 100.0 + x + v * h * math.cos(mid)"))
+    source = helper.read_text()
+    edited = source.replace("return x + chord * math.cos(mid)", "return 100.0 + x + chord * math.cos(mid)")
+    assert edited != source
+    helper.write_text(edited)
     assert probe(copies[1]) == (103.0, 0)   # compiled again with the edited helper

@@ -222,6 +222,12 @@ def test_an_age_of_exactly_stale_after_is_not_stale():
         seed=1, default=LinkModel(delay=0.2), watchdog=WatchdogConfig(stale_after=0.15))))
     assert np.abs(at_limit.trajectory("v")[1]).max() > 0.5
     assert np.abs(beyond.trajectory("v")[1]).max() == 0.0
+    # the result says so: stopped at t = 0 (no message yet); at the limit it resumes at the
+    # third fresh message (t = 0.15, 0.2, 0.25: stopping at 0 … 0.2, five instants)
+    events = lambda result: result.to_dict()["robots"]["f"]["events"]   # noqa: E731
+    assert (events(at_limit)["watchdog_stops"], events(at_limit)["watchdog_stopped_s"]) == (1, pytest.approx(0.25))
+    assert (events(beyond)["watchdog_stops"], events(beyond)["watchdog_stopped_s"]) == (1, pytest.approx(6.05))
+    assert "watchdog_stops" not in simulate(scenario).to_dict()["robots"]["f"]["events"]   # no link model
 
 
 @pytest.mark.parametrize("field", ["decel_v", "decel_omega", "stale_after"])

@@ -169,6 +169,9 @@ def format_summary(summary: dict) -> str:
             events.append(f"saturated {100 * ev['saturated_fraction']:.1f}% of samples")
         if ev["singular_samples"]:
             events.append(f"singular x{ev['singular_samples']} from t = {ev['first_singular_time']:.3g} s")
+        if ev.get("watchdog_stops"):
+            events.append(f"its watchdog stopped it {ev['watchdog_stops']} time(s), "
+                          f"{ev['watchdog_stopped_s']:.4g} s stopping or stopped")
         if events:
             notes.append(f"{name}: {', '.join(events)}")
     safety = summary["safety"]

@@ -131,6 +131,7 @@ class RobotProgram:
         self.inbox: dict[str, deque] = {p: deque(maxlen=PARENT_STATES) for p in setup.parents}
         self.latest: dict[str, msg.RobotState] = {}
         self.predict = False   # lockstep: parents' messages advanced over their age (run_lockstep)
+        self.stopped_instants = 0   # control instants the watchdog spent stopping or stopped
         self.subscribers: set[str] = set()
         self.agreed: set[str] = set()
         self.progress = {child: -1 for child in setup.children}
@@ -280,6 +281,7 @@ class RobotProgram:
         stop or resume is recorded at run time ``t`` (and monotonic time ``at``, realtime)."""
         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0], command[1], period)
         self.guard = guard   # explicit data, for observers
+        self.stopped_instants += guard.mode != FOLLOWING
         if event is not None:
             stamp = {} if at is None else {"at": at}
             self._event({"t": t, "event": event, "age": age if age != float("inf") else None, **stamp})
@@ -587,7 +589,8 @@ class RobotProgram:
                 "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
                                   for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
                 "latency": {p: list(samples) for p, samples in self.latency.items()},
-                "events": list(self.events), "transport": self.transport.stats(),
+                "events": list(self.events), "stopped_instants": int(self.stopped_instants),
+                "transport": self.transport.stats(),
                 "period": {"mean": float(periods.mean()) if periods.size else None,
                            "std": float(periods.std()) if periods.size else None,
                            "p99": float(np.percentile(periods, 99)) if periods.size else None,

@@ -84,8 +84,8 @@ K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
  SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D, SIN_LAST,
- SIN_CROSSINGS) = range(27)
-STAT_COUNT = 27
+ SIN_CROSSINGS, WATCHDOG_STOPS, WATCHDOG_STOPPED) = range(29)
+STAT_COUNT = 29   # (the last two: a follower's watchdog under a link model, counted by nonholo.sim.linkstep)
 ROBOT_STATS = FIRST_SINGULAR + 1   # the statistics of every robot (``add_sample``); the rest: formations
 # ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order.
 assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,

@@ -26,7 +26,9 @@ control instants; ``ring`` (5, depth, R, B) the messages (x, y, θ, v, ω) sent;
 int64 its index (−1: none yet); ``guard`` (3, R, B) the watchdog's mode (1: stopping),
 its count of fresh states and the l–φ bearing's branch as the follower sees it;
 ``watchdog`` (4, B) stale_after, resume_after, decel_v, decel_omega of each copy;
-``predict`` (B,) 1.0 where a copy's followers predict, else 0.0.
+``predict`` (B,) 1.0 where a copy's followers predict, else 0.0. ``stats``: the kernel's
+statistics, whose rows ``WATCHDOG_STOPS`` and ``WATCHDOG_STOPPED`` count each follower's
+watchdog stops and the control instants it spent stopping or stopped.
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ from nonholo.models.unicycle import unicycle_arc
 from nonholo.numerics import sincos
 from nonholo.sim import kernel as kn
 from nonholo.sim.links import group_schedules
-from nonholo.sim.watchdog import watchdog_update
+from nonholo.sim.watchdog import STOP, watchdog_update
 
 MESSAGE = 5          # x, y, θ, v, ω
 G_MODE, G_FRESH, G_BRANCH = range(3)
@@ -53,7 +55,7 @@ GUARD_COUNT = 3
 # contraction, so that a follower's command here is bit for bit the robot program's.
 @njit(cache=True, error_model="numpy")
 def link_instant(c, period, state, fields, limits, targets, target_row, offsets, kinds, order, parents, feeds,
-                 sin_floor, instant, held, schedule, ring, inbox, used, guard, watchdog, predict):
+                 sin_floor, instant, held, schedule, ring, inbox, used, guard, watchdog, predict, stats):
     """Control instant ``c`` (see the module docstring): sets ``held`` (HELD_COUNT, R, B) of
     every robot from the roots' commands in ``instant`` and the followers' linked commands."""
     n_batch = state.shape[2]
@@ -106,11 +108,13 @@ def link_instant(c, period, state, fields, limits, targets, target_row, offsets,
                         v, omega, sat_v, sat_w, singular, _, _, _, _, _, _, _ = kn.pair_command(
                             x, y, theta, px, py, ptheta, inbox[3, 0, r, b], qx, qy, qtheta, inbox[3, 1, r, b], z1_d,
                             z2_d, rate_1, rate_2, k1, k2, d, sin_floor, v_max, omega_max)
-                stopping, fresh, v_out, omega_out, _ = watchdog_update(
+                stopping, fresh, v_out, omega_out, event = watchdog_update(
                     guard[G_MODE, r, b] != 0.0, int(guard[G_FRESH, r, b]), held[kn.HELD_V, r, b],
                     held[kn.HELD_OMEGA, r, b], age, new, v, omega, watchdog[0, b], int(watchdog[1, b]),
                     watchdog[2, b], watchdog[3, b], period)
                 guard[G_MODE, r, b] = 1.0 if stopping else 0.0
+                stats[kn.WATCHDOG_STOPS, r, b] += 1.0 if event == STOP else 0.0
+                stats[kn.WATCHDOG_STOPPED, r, b] += 1.0 if stopping else 0.0
                 guard[G_FRESH, r, b] = fresh
                 if stopping:
                     v, omega, xi_dot, singular, sat_v, sat_w = v_out, omega_out, 0.0, 0.0, 0.0, 0.0
@@ -188,7 +192,7 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
                      group.parents, branch, scenario.sin_floor, instant)
             link_instant(c, period, state, fields, limits, targets, row, group.offsets, group.kinds, group.order,
                          group.parents, group.feeds, scenario.sin_floor, instant, held, schedule, ring, inbox, used,
-                         guard, watchdog, predict)
+                         guard, watchdog, predict, outputs[0])
             k_stop = min(k + every, n_steps)
             # The kernel processes output step k_stop too when it is the last one: stop short of
             # it when it is a control instant (the next pass sets its commands first).

@@ -204,10 +204,16 @@ class SimulationResult:
     def _events(self, i: int, member: int) -> dict:
         samples = self.t.size
         sat_v, sat_w = self._stat(k.SAT_V, i, member), self._stat(k.SAT_W, i, member)
-        return {"saturated_v_samples": int(sat_v), "saturated_omega_samples": int(sat_w),
-                "saturated_fraction": max(sat_v, sat_w) / samples, "saturated_samples": int(max(sat_v, sat_w)),
-                "singular_samples": int(self._stat(k.SINGULAR, i, member)),
-                "first_singular_time": _none_if_inf(self._stat(k.FIRST_SINGULAR, i, member))}
+        out = {"saturated_v_samples": int(sat_v), "saturated_omega_samples": int(sat_w),
+               "saturated_fraction": max(sat_v, sat_w) / samples, "saturated_samples": int(max(sat_v, sat_w)),
+               "singular_samples": int(self._stat(k.SINGULAR, i, member)),
+               "first_singular_time": _none_if_inf(self._stat(k.FIRST_SINGULAR, i, member))}
+        scenario = self.scenarios[member]
+        if scenario.network is not None and scenario.hold_every and scenario.robots[i].parents:
+            # a follower under a link model: its watchdog (spec fleet.md §5)
+            out["watchdog_stops"] = int(self._stat(k.WATCHDOG_STOPS, i, member))
+            out["watchdog_stopped_s"] = self._stat(k.WATCHDOG_STOPPED, i, member) * scenario.dt * scenario.hold_every
+        return out
 
     def _control(self, i: int, member: int) -> dict:
         samples, s = self.t.size, lambda name: self._stat(name, i, member)

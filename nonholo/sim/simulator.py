@@ -437,11 +437,12 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
 
 
 def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.ndarray, helds: np.ndarray,
-                 elapsed_s: float) -> SimulationResult:
+                 elapsed_s: float, watchdog: np.ndarray | None = None) -> SimulationResult:
     """The result of a sampled-data run whose trajectories were computed elsewhere (by the
     robots of a fleet): ``states`` (N+1, 4, robots) and the commands each robot held,
     ``helds`` (N+1, HELD_COUNT, robots), robots in scenario order; scored by the kernel's
-    own statistics code, as ``simulate`` scores its runs."""
+    own statistics code, as ``simulate`` scores its runs. ``watchdog`` (2, robots): each
+    follower's watchdog stops and stopped control instants, as the robots counted them."""
     n_steps, n_robots = scenario.n_steps, len(scenario.robots)
     stats = np.empty((kn.STAT_COUNT, n_robots, 1))
     pair_stats = np.full((kn.PAIR_COUNT, len(scenario.components()), 1), np.nan)
@@ -465,6 +466,8 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
             records[:, :, indices, 0] = g_record[:, :, :, b]
             substeps[indices] = item.plan.max()
         _check_diverged(group, g_stats)
+    if watchdog is not None:
+        stats[[kn.WATCHDOG_STOPS, kn.WATCHDOG_STOPPED], :, 0] = watchdog
     grid = np.arange(n_steps + 1) * scenario.dt
     rows = planned[0].rows if scenario.reference is not None else None
     return SimulationResult(scenarios=(scenario,), t=grid, reference_rows=rows, stats=stats, pair_stats=pair_stats,
