@@ -91,7 +91,10 @@ def package_digest() -> bytes:
     digest = hashlib.sha256()
     for path in sorted(PACKAGE_DIR.rglob("*.py")):
         digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode("utf-8") + b"\0")
-        digest.update(path.read_bytes())
+        try:
+            digest.update(path.read_bytes())
+        except OSError as exc:   # an unreadable file still changes the stamp, and never stops an import
+            digest.update(f"unreadable: {exc.errno}".encode("utf-8"))
         digest.update(b"\0")
     return digest.digest()
 
