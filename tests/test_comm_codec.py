@@ -170,7 +170,7 @@ def test_encoder_follows_conventions():
                          conversation_id=("formation", 7), user_params={"note": "two words"})
     text = encode_text(message)
     assert text.startswith("(request\n :sender (agent-identifier :name a@p)\n :receiver (set ")
-    assert ':content "C:\\dir \\"x\\""' in text        # backslash stands for itself
+    assert ':content #10"C:\\dir "x"' in text          # a backslash: a byte-length string (spec §1.3)
     assert ":reply-by 20250101T120005123Z" in text      # UTC, Z, milliseconds
     assert ':X-note "two words"' in text and ":conversation-id (formation 7)" in text
     assert encode_text(ACLMessage("inform", content="  padded  ")).count("  padded  ") == 1
@@ -213,3 +213,17 @@ def test_model_validation():
         ACLMessage("query")  # PADE's non-standard name
     with pytest.raises(ValueError):
         AgentID("")
+
+
+@pytest.mark.parametrize("token", ["@x", "12", "-x", "#x", "1.5", "20250101T120005000Z"])
+def test_agent_names_and_addresses_are_words_or_strings(token):
+    """spec comm.md §1.2: ``:name`` is a Word (a String accepted too) and an address is
+    lexically a Word or String: a bare number, date or a token starting with @, # or - is
+    neither; quoted, the same text is a name."""
+    for message in (f"(inform :sender (agent-identifier :name {token}))",
+                    f"(inform :sender (agent-identifier :name a :addresses (sequence {token})))"):
+        with pytest.raises(ACLParseError, match="word or a string|word or string"):
+            decode(message.encode())
+    quoted = decode(f'(inform :sender (agent-identifier :name "{token}" :addresses (sequence "{token}")))'.encode())
+    assert quoted.sender.name == token and quoted.sender.addresses == (token,)
+    assert decode(encode(quoted)) == quoted

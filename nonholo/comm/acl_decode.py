@@ -270,8 +270,9 @@ class _Parser:
             items.append(read_item(item, depth + 1))
 
     def url(self, token: Token, depth: int) -> str:
-        if token[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING):
-            self.fail(token, "expected an address (URL)")
+        if token[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING) or (
+                token[0] == lex.ATOM and not lex.WORD.fullmatch(token[1])):
+            self.fail(token, "expected an address (URL): a word or a string")
         return token[1]
 
     def agent_id(self, token: Token, depth: int) -> AgentID:
@@ -296,7 +297,8 @@ class _Parser:
             seen.add(name)
             if name == "name":
                 value = self.value_token(slot)
-                if value[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING) or not value[1]:
+                if value[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING) or not value[1] or (
+                        value[0] == lex.ATOM and not lex.WORD.fullmatch(value[1])):
                     self.fail(value, "agent :name must be a non-empty word or string")
                 slots["name"] = value[1]
             elif name == "addresses":

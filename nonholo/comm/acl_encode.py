@@ -1,17 +1,19 @@
 """Encoder for the ACL string representation, following JADE's layout (one parameter per
 line, lower-case keywords, receivers as ``(set (agent-identifier ...))``).
 
-Quoting rule (chosen so that JADE 4.6.5 reads what the standard lets it read): a ``str``
-goes out bare only if it is a printable-ASCII Word that reads back as the same word
-(``acl_lexical.is_portable_word``); otherwise as a string literal with ``\\"`` for quotes,
-where every other character, backslashes and control characters included, stands for
-itself. The one value a string literal cannot hold is one ending in a backslash (the spec
-has no escape for it: ``"C:\\"`` would read as an escaped quote), which goes out as a
-byte-length string ``#N"...`` (N counted in UTF-8 bytes). Content is never trimmed.
+Quoting rule (spec comm.md §1.3, encoder rules 2–3): a ``str`` goes out bare only if it is
+a printable-ASCII Word that reads back as the same word (``acl_lexical.is_portable_word``);
+a value with a backslash or a control character goes out as a byte-length string
+``#N"...`` (N counted in UTF-8 bytes): the standard has no escape for a backslash, so
+``"C:\\"`` would not end, and ``\\"`` inside a literal reads differently in different readers
+(one that takes ``\\\\`` for an escaped backslash sees the quote after it end the string, and
+what follows as parameters of their own, under the same MAC); every other value as a string
+literal with ``\\"`` for quotes. Content is never trimmed.
 """
 from __future__ import annotations
 
 import math
+import re
 from datetime import datetime
 
 from nonholo.comm import acl_lexical as lex
@@ -63,10 +65,13 @@ def _user_params(params) -> list[tuple[str, Expression]]:
     return list(params.items())
 
 
+_CONTROL = re.compile("[\x00-\x1f\x7f]")
+
+
 def string_literal(text: str) -> str:
     if not isinstance(text, str):
         raise ACLEncodeError(f"expected a string, got {type(text).__name__}")
-    if not text.endswith("\\"):
+    if "\\" not in text and not _CONTROL.search(text):
         return '"' + text.replace('"', '\\"') + '"'
     return f'#{len(text.encode("utf-8"))}"{text}'
 
