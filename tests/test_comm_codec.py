@@ -227,3 +227,15 @@ def test_agent_names_and_addresses_are_words_or_strings(token):
     quoted = decode(f'(inform :sender (agent-identifier :name "{token}" :addresses (sequence "{token}")))'.encode())
     assert quoted.sender.name == token and quoted.sender.addresses == (token,)
     assert decode(encode(quoted)) == quoted
+
+
+def test_a_message_read_at_the_size_limit_is_written_again():
+    """A compact message just under 64 KiB decodes; written back one parameter per line it
+    would pass the limit, so it goes out on one line (spec §1.3: newlines are optional)."""
+    params = " ".join(f":X-p{i} {i}" for i in range(4700))
+    data = f"(inform {params})".encode()
+    assert 60_000 < len(data) <= 65_536
+    message = decode(data)
+    again = encode(message)
+    assert len(again) <= 65_536 and b"\n" not in again and decode(again) == message
+    assert b"\n :X-p0 0" in encode(ACLMessage("inform", user_params={"p0": 0}))   # short ones: one per line

@@ -29,6 +29,8 @@ def encode(message: ACLMessage, *, max_depth: int = lex.DEFAULT_MAX_DEPTH,
     lex.check_limits(max_depth, max_size)
     try:
         data = _message_text(message, max_depth).encode("utf-8")
+        if len(data) > max_size:   # one line (newlines are optional): a message read at the limit goes out again
+            data = _message_text(message, max_depth, " :").encode("utf-8")
     except UnicodeEncodeError as exc:
         raise ACLEncodeError(f"text is not encodable as UTF-8: {exc.reason}") from None
     if len(data) > max_size:
@@ -40,15 +42,15 @@ def encode_text(message: ACLMessage, **limits: int) -> str:
     return encode(message, **limits).decode("utf-8")
 
 
-def _message_text(message: ACLMessage, max_depth: int) -> str:
+def _message_text(message: ACLMessage, max_depth: int, lead: str = "\n :") -> str:
     parts = ["(", message.performative]
     for acl_name, attribute in PARAMETER_ATTRIBUTES.items():
         value = getattr(message, attribute)
         if value is not None:
-            parts.append(f"\n :{acl_name} ")
+            parts.append(f"{lead}{acl_name} ")
             parts.append(_PARAMETER_WRITERS[acl_name](value, max_depth))
     for name, value in _user_params(message.user_params):
-        parts.append(f"\n :X-{name} ")
+        parts.append(f"{lead}X-{name} ")
         parts.append(_expression(value, 1, max_depth))
     parts.append(")")
     return "".join(parts)
