@@ -492,8 +492,10 @@ class RobotProgram:
                         self.ages[parent][instant] = used
                         age = max(age, used)
                         if predict:
+                            # over the age the watchdog measures (spec fleet.md §3, §5): since the
+                            # arrival, on this robot's clock (the sender's `t` is another machine's)
                             px, py, ptheta = unicycle_arc(state.x, state.y, state.theta, state.v, state.omega,
-                                                          now - state.t if state.t <= now else 0.0)
+                                                          max(used, 0.0))
                             state = msg.RobotState(state.robot, state.k, state.seq, state.t, px, py, ptheta,
                                                    state.v, state.omega)
                         self.latest[parent] = state
