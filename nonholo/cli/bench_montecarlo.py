@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         "bench-montecarlo", help="time a large Monte-Carlo study here and on a local Dask cluster",
         description="Time SAMPLES Monte-Carlo draws of Test 1 (figure eight, 80π s, dynamic feedback, dt = 0.01 s, "
                     "start x, y, θ ~ normal(0, 0.5)), statistics only: in this process (target: under a minute) "
-                    "and on a local Dask cluster of 2 worker processes (target: within 20 %% of the local time). "
+                    "and on a local Dask cluster of 2 worker processes (target: within 20 % of the local time). "
                     "Also measures the simulator's plain batch rate in the same run, for the ratio.")
     parser.add_argument("--samples", type=int, default=100_000, help="draws (default: %(default)s)")
     parser.add_argument("--no-dask", action="store_true", help="skip the Dask run")

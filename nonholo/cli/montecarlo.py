@@ -63,13 +63,15 @@ def handle(args: argparse.Namespace) -> int:
             text = Path(path).read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise NonholoInputError(f"{path}: cannot read: {exc}") from None
-        if not args.quiet and not sys.stderr.isatty():
-            print(f"nonholo montecarlo: simulating {args.samples} samples of {args.scenario} …", file=sys.stderr,
-                  flush=True)
+        announce = None
+        if not args.quiet and not sys.stderr.isatty():   # once the inputs are checked (a bad one: one line)
+            def announce():
+                print(f"nonholo montecarlo: simulating {args.samples} samples of {args.scenario} …",
+                      file=sys.stderr, flush=True)
         result = run_montecarlo(text, args.vary, args.samples, seed=args.seed, source=str(path), steps=args.steps,
                                 saturation_share=args.saturation_share, worst=args.worst, worst_by=args.worst_by,
                                 out=Path(args.out) if args.out else None, dask=args.dask,
-                                progress=False if args.quiet else None)
+                                progress=False if args.quiet else None, on_start=announce)
     except NonholoInputError as exc:
         print(f"nonholo montecarlo: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -60,6 +60,10 @@ def handle(args: argparse.Namespace) -> int:
 
         if args.every < 1:
             raise NonholoInputError(f"--every must be a positive integer, got {args.every}")
+        if args.record:   # an optional dependency: say so before the run, not after it
+            from nonholo.view import require
+
+            require("mcap")
         recorded = bool(args.plot or args.out or args.animate or args.record or not args.json)
         result = simulate(scenario, record=recorded,
                           progress=False if args.quiet else None)

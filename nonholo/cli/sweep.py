@@ -45,15 +45,18 @@ def handle(args: argparse.Namespace) -> int:
         path = examples.resolve(args.scenario)
         scenario = load_scenario(path)
         text = path.read_text(encoding="utf-8") if args.dask else None
+        announce = None
         if not args.quiet and not sys.stderr.isatty():  # a terminal gets the simulator's progress bar instead
             points = 1
             for axis in axes:
                 points *= axis.values.size
-            print(f"nonholo sweep: simulating {points} grid points of {args.scenario} as one batch …", file=sys.stderr,
-                  flush=True)
+
+            def announce():   # once the robot and gains are checked (a bad one: one line)
+                print(f"nonholo sweep: simulating {points} grid points of {args.scenario} as one batch …",
+                      file=sys.stderr, flush=True)
         result = run_sweep(scenario, axes, robot=args.robot, metric=args.metric,
                            steps=args.steps, progress=False if args.quiet else None, dask=args.dask, text=text,
-                           source=str(path))
+                           source=str(path), on_start=announce)
     except NonholoInputError as exc:
         print(f"nonholo sweep: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

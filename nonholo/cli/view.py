@@ -24,8 +24,10 @@ def register(subparsers) -> None:
                     "fleet's key file. The page is read-only, on 127.0.0.1 by default, and needs the random "
                     "token printed in its address. Ctrl-C stops it.",
         epilog="Exit codes: 0 ok, 1 the server could not start, 2 bad input. Example: nonholo fleet "
-               "formation-chain --observe 127.0.0.1:7500 --keys fleet.keys, then nonholo view formation-chain "
-               "--attach 127.0.0.1:7500 --keys fleet.keys")
+               "formation-chain --control-period 0.02 --observe 127.0.0.1:7500 --keys fleet.keys, then "
+               "nonholo view formation-chain --control-period 0.02 --attach 127.0.0.1:7500 --keys fleet.keys "
+               "(to start the viewer first, make the key file first: nonholo acl keygen fleet.keys --ids 1 2 3 4 5 6 7 8, "
+               "key id i+1 for the i-th robot)")
     parser.add_argument("source", help="a .mcap recording, or a directory written by nonholo run --out; with "
                                        "--attach, the fleet's scenario (.toml or a bundled example)")
     parser.add_argument("--attach", metavar="HOST:PORT",

@@ -216,7 +216,7 @@ def read_link_settings(data: dict, edges, fail) -> LinkSettings:
             if not isinstance(value, str):
                 fail(f"{where}.{key}", f"expected a robot's name, got {describe_value(value)}")
         if edge not in edges:
-            fail(where, f"no link {describe_value(edge[0])} -> {describe_value(edge[1])} in the formation "
+            fail(where, f"no link {edge[0][:40]!r} -> {edge[1][:40]!r} in the formation "
                         "(parent and child must name a robot and one of its followers)")
         if edge in links:
             fail(where, f"link {edge[0]} -> {edge[1]} given twice")

@@ -420,12 +420,13 @@ def _finite_or_none(value: float):
 def run_montecarlo(text: str, variations_text: Sequence[str], samples: int, seed: int = 0, source: str = "<scenario>",
                    steps: int | None = None, saturation_share: float = 0.05, worst: int = 5,
                    worst_by: str | None = None, out: Path | None = None, dask: str | None = None,
-                   progress: bool | None = None) -> MonteCarloResult:
+                   progress: bool | None = None, on_start=None) -> MonteCarloResult:
     """A Monte-Carlo study of the scenario of TOML ``text``: ``samples`` draws of the
     ``variations_text`` (``ROBOT.PATH=DIST``), seeded by ``seed``. ``out``: stream the
     samples to ``out/samples.csv`` chunk by chunk and write ``summary.json``,
     ``histograms.png`` and the ``worst`` samples as ``worst-K.toml``. ``dask``: None (this
-    process), "local" or a scheduler address."""
+    process), "local" or a scheduler address. ``on_start()``, if given, is called once the
+    inputs are checked, before the first simulation (``nonholo montecarlo`` says it started)."""
     started = time.perf_counter()
     if not (isinstance(samples, int) and 1 <= samples <= MAX_SAMPLES):
         raise NonholoInputError(f"--samples must be an integer from 1 to {MAX_SAMPLES}, got {samples!r}")
@@ -466,6 +467,8 @@ def run_montecarlo(text: str, variations_text: Sequence[str], samples: int, seed
                 raise NonholoInputError(f"--vary {variation.field}: {outside} of {samples} draws fall outside "
                                         f"[{low:g}, {high:g}{')' if variation.path == 'loss' else ']'}: choose a "
                                         "distribution within the range (e.g. uniform)")
+    if on_start is not None:
+        on_start()
     robots = [r.name for r in part.robots]
     work = len(robots) * part.n_steps * (part.substeps or 1)
     bounds = distributed.chunk_bounds(samples, work)

@@ -286,20 +286,25 @@ class SweepSpec:
 
 def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "mean", steps: int | None = None,
                progress: bool | None = None, dask: str | None = None, text: str | None = None,
-               source: str = "<scenario>") -> list[SweepResult]:
+               source: str = "<scenario>", on_start=None) -> list[SweepResult]:
     """Several sweeps of one scenario simulated together as ONE batch (one ``simulate``
     call, statistics only); ``steps`` overrides the scenario's number of output steps.
 
     ``dask`` ("local" or a scheduler address; needs the scenario's TOML ``text``) spreads
     chunks of the batch over a Dask cluster (``nonholo.studies.distributed``). Lone robots'
     results do not depend on their batch, so the chunks give the one batch's numbers; sweeps
-    of formations are cut into the same chunks here and there."""
+    of formations are cut into the same chunks here and there. ``on_start()``, if given, is
+    called once the robots and gains are checked, before the first simulation."""
     if metric not in METRICS:
         raise NonholoInputError(f"unknown metric {metric!r} (valid: {', '.join(METRICS)})")
     if dask is not None and text is None:
         raise NonholoInputError("a sweep on Dask needs the scenario's TOML text (workers parse it)")
     if steps is not None:
         scenario = dataclasses.replace(scenario, dt=None, steps=steps)
+    for spec, base in zip(specs, _spans(scenario, specs)[1]):   # robots and gains checked before any run
+        sweep_robots(base, [dataclasses.replace(a, values=a.values[:1]) for a in spec.axes])
+    if on_start is not None:
+        on_start()
     payload = {"scenario": scenario, "text": text, "source": source, "steps": steps, "progress": progress,
                "specs": [(spec.robot, [(a.name, a.values) for a in spec.axes]) for spec in specs]}
     started = time.perf_counter()
