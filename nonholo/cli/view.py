@@ -116,6 +116,10 @@ def handle(args: argparse.Namespace) -> int:
         elif source.is_file():
             from nonholo.view.record import read_recording
 
+            if source.suffix.lower() == ".toml":
+                raise NonholoInputError(f"{source}: a scenario, not a recording: replay a .mcap file or an --out "
+                                        "directory, or watch a running fleet of it with --attach HOST:PORT --keys FILE")
+
             replay = read_recording(source)
         else:
             raise NonholoInputError(f"{source}: no such file or directory (expected a .mcap recording or the "

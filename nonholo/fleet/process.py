@@ -154,10 +154,10 @@ def log_event(name: str, event: dict) -> None:
 
 
 def announce_running(name: str):
-    """Say on stderr when the control loop starts (``robot NAME: running at T``, T on the
-    monotonic clock), for whoever watches the process."""
+    """Say on stderr when the control loop starts (``robot NAME: running at T s ...``, T on
+    this machine's monotonic clock, the stamp of the robot's states), for whoever watches."""
     def announce(t: float) -> None:
-        print(f"robot {name}: running at {t!r}", file=sys.stderr, flush=True)
+        print(f"robot {name}: running at {t:.6f} s on this machine's monotonic clock", file=sys.stderr, flush=True)
     return announce
 
 

@@ -90,7 +90,7 @@ def dask_client(address: str | None, workers: int = 2) -> Iterator:
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise NonholoInputError(f"--dask needs Dask: {INSTALL_HINT}") from None
+        raise NonholoInputError(f"Dask is not installed ({address!r} asks for it): {INSTALL_HINT}") from None
     with contextlib.ExitStack() as stack:
         if address == LOCAL:
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
