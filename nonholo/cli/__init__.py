@@ -164,6 +164,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def announce_compiling(prog: str) -> None:
+    """On a terminal, say once when numba starts compiling (its ``numba:compile`` event fires
+    on cache misses only: the first run after an install or an update), so that a first run
+    is not a silent pause of seconds."""
+    if not sys.stderr.isatty():
+        return
+    from numba.core import event
+
+    class FirstCompile(event.Listener):
+        said = False
+
+        def on_start(self, ev):
+            if not self.said:
+                self.said = True
+                print(f"{prog}: compiling for this machine (first run after an install or update) …",
+                      file=sys.stderr, flush=True)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", FirstCompile())
+
+
 def main(argv: list[str] | None = None) -> int:
     from nonholo.errors import NonholoInputError, SimulationError
 
@@ -180,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
                 parser.print_help()
                 return EXIT_BAD_INPUT
             prog = f"nonholo {args.command}"
+            if argv is None and args.command != "study":   # (the study's progress names what compiles)
+                announce_compiling(prog)
             return int(args.handler(args) or EXIT_OK)
         finally:
             sys.stdout.flush()  # a closed pipe shows here, not at exit (also after --help's SystemExit)

@@ -131,7 +131,8 @@ def format_summary(summary: dict) -> str:
     sim = summary["simulation"]
     reference = summary["reference"]["kind"] + " reference" if summary["reference"] else "no reference"
     lines = [f"{summary['scenario']}: {reference}, {sim['duration']:.6g} s, {sim['steps']} steps of {sim['dt']:.4g} s "
-             f"({sim['method']}, up to {sim['max_substeps']} sub-steps), {sim['elapsed_s']:.2f} s",
+             f"({sim['method']}, up to {sim['max_substeps']} sub-step{'s' if sim['max_substeps'] != 1 else ''}), "
+             f"run in {sim['elapsed_s']:.2f} s",
              f"{'robot':<16} {'law':<26} {'what':<10} {'mean':>9} {'max':>9} {'final':>9} {'peak v':>7} {'peak w':>7}"]
     notes = []
     for name, robot in summary["robots"].items():
