@@ -109,3 +109,15 @@ def test_missing_file_and_help():
     assert code == 2 and "no-such-file.toml: cannot read" in err and "Traceback" not in err
     code, out, _ = run_cli("run", "--help")
     assert code == 0 and "test1-eight" in out
+
+
+def test_summary_lines_wrap_within_100_columns_never_between_a_number_and_its_unit():
+    from nonholo.cli.run import wrap
+
+    for pad in range(60, 100):
+        line = "x" * pad + " run in 0.46 s, delay 0.15 s + jitter up to 0 s; beyond 0.1 s at 3.2 m/s, 7 steps"
+        wrapped = wrap(line).split("\n")
+        assert all(len(part) <= 100 for part in wrapped)
+        assert " ".join(part.strip() for part in wrapped) == line
+        assert not any(part.rstrip()[-1:].isdigit() and nxt.lstrip()[:1] in "smr" and nxt.lstrip().split()[0] in
+                       ("s", "s,", "s;", "m/s,", "steps") for part, nxt in zip(wrapped, wrapped[1:]))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import textwrap
 from pathlib import Path
@@ -194,5 +195,16 @@ def format_summary(summary: dict) -> str:
     lines += notes
     lines.append("errors on the uniform output grid; peak v in m/s, peak w in rad/s")
     # long names and notes wrap (continuation lines indented): the terminal output fits 100 columns
-    return "\n".join(textwrap.fill(line, 100, subsequent_indent="    ", break_on_hyphens=False)
-                     if len(line) > 100 else line for line in lines)
+    return "\n".join(wrap(line) for line in lines)
+
+
+_QUANTITY = re.compile(r"(\d) (?=(?:s|m|m/s|rad|rad/s|steps?|robots?|time\(s\))\b)")
+
+
+def wrap(line: str, width: int = 100) -> str:
+    """``line`` wrapped to ``width`` columns (continuation lines indented), never between a
+    number and its unit."""
+    if len(line) <= width:
+        return line
+    kept = _QUANTITY.sub("\\1\u00a0", line)   # a no-break space: textwrap does not break there
+    return textwrap.fill(kept, width, subsequent_indent="    ", break_on_hyphens=False).replace("\u00a0", " ")
