@@ -1,6 +1,8 @@
 """Gain tuning: the closed-form case (dynamic feedback on a straight line, ∫|e|² dt =
 |ė(0)|²/(2 kp kd)), objectives parsed safely, robust tuning over starts, the CLI."""
+import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -46,6 +48,12 @@ def test_finds_the_known_optimum():
     assert result.baseline_objective == pytest.approx(ise(1.0, 0.7), rel=2e-3)
     assert result.history == sorted(result.history, reverse=True)  # the best never gets worse
     assert result.evaluations >= 16
+    # ∫|e|² falls as kp, kd grow: the optimum is on the upper bounds, and the result says so
+    warning = result.bound_warning()
+    assert re.search(r"kp = 3\.9\d* is at its upper bound \(0\.5:4\); kd = 3\.9\d* is at its upper bound", warning)
+    assert dataclasses.replace(result, gains={"kp": 2.0, "kd": 0.51}).bound_warning() == (
+        "warning: kd = 0.51 is at its lower bound (0.5:4): the optimum may lie beyond it; widen --bounds that way")
+    assert dataclasses.replace(result, gains={"kp": 2.0, "kd": 2.0}).bound_warning() is None
 
 
 def test_objectives_are_parsed_never_evaluated():

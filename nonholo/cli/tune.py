@@ -81,6 +81,8 @@ def handle(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(describe(result))
+    if result.bound_warning():
+        print(f"nonholo tune: {result.bound_warning()}", file=sys.stderr)
     return EXIT_OK
 
 

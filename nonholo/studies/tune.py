@@ -134,6 +134,21 @@ class TuneResult:
     seed: int
     timing: dict = field(default_factory=dict)
 
+    def bound_warning(self, share: float = 0.01) -> str | None:
+        """A one-line warning if the optimum lies on a bound (within ``share`` of its range),
+        else None: the optimum may lie beyond it."""
+        parts = []
+        for bound in self.bounds:
+            value, span = self.gains.get(bound.name), bound.high - bound.low
+            if value is None or span <= 0:
+                continue
+            for side, edge in (("lower", bound.low), ("upper", bound.high)):
+                if abs(value - edge) <= share * span:
+                    parts.append(f"{bound.name} = {value:.4g} is at its {side} bound ({bound.low:g}:{bound.high:g})")
+        if not parts:
+            return None
+        return f"warning: {'; '.join(parts)}: the optimum may lie beyond it; widen --bounds that way"
+
     def to_dict(self) -> dict:
         """JSON-ready; apart from ``timing`` it depends only on the scenario, options and seed."""
         return {"scenario": self.scenario, "robot": self.robot, "controller": self.controller,
