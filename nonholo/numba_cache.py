@@ -21,10 +21,11 @@ the tests reuse what the first run compiled).
 only, so a caller kept the old code of a compiled helper edited in another module (measured:
 ``watchdog_update`` edited, the link step that calls it still ran the old one, even after
 its own file was touched). nonholo's functions are stamped with a digest of the whole
-package's source instead (``package_digest``): an edit anywhere compiles every function
-again when it is next used, and an index written by other source is never loaded. Two
-checkouts of *different* source therefore take turns in one cache folder (each run
-recompiles what the other overwrote): give each its own ``NUMBA_CACHE_DIR`` to keep both warm.
+package's source instead (``package_digest``), and that digest is part of every cache file's
+name: an edit anywhere compiles every function again when it is next used, copies of one
+source share their files, and different sources never read or write each other's (two
+checkouts side by side each keep theirs). Files of other sources not modified for two weeks
+are removed (``prune_once``), so edits and upgrades do not pile up.
 
 How: numba asks a list of *cache locators*, in order, where a function's cache lives; the
 first that accepts the function wins. ``install()`` (run by ``import nonholo``, before any
@@ -99,6 +100,49 @@ def package_digest() -> bytes:
     return digest.digest()
 
 
+def digest_tag() -> str:
+    """The short form of ``package_digest`` in cache file names."""
+    return package_digest().hex()[:12]
+
+
+def subfolder(source_dir: Path) -> str:
+    """The cache sub-folder of a source folder of the package, named after its place in the
+    package (``sim_<sha1 of "nonholo/sim">``), not its absolute path."""
+    inside = source_dir.relative_to(PACKAGE_DIR.parent).as_posix()
+    return f"{inside.rsplit('/', 1)[-1]}_{hashlib.sha1(inside.encode('utf-8')).hexdigest()}"
+
+
+PRUNE_AFTER_S = 14 * 86400   # files of other sources untouched this long go
+
+
+@functools.lru_cache(maxsize=None)
+def prune_once(root: Path) -> int:
+    """Remove, once per process and cache root, the compiled files of *other* sources of
+    the package (another digest in the name) not modified for ``PRUNE_AFTER_S``: each edit
+    or upgrade leaves a set behind. Only nonholo's own sub-folders are looked at; errors
+    (a file gone, no permission) are ignored. Returns how many files went."""
+    import time
+
+    current, removed = f"-{digest_tag()}.", 0
+    cutoff = time.time() - PRUNE_AFTER_S
+    folders = {subfolder(path.parent) for path in PACKAGE_DIR.rglob("*.py")}
+    for name in folders:
+        try:
+            entries = list(os.scandir(root / name))
+        except OSError:
+            continue
+        for entry in entries:
+            if not entry.name.endswith((".nbi", ".nbc")) or current in entry.name:
+                continue
+            try:
+                if entry.stat().st_mtime < cutoff:
+                    os.unlink(entry.path)
+                    removed += 1
+            except OSError:
+                pass
+    return removed
+
+
 def _make_locator():
     from numba.core import caching
 
@@ -118,10 +162,16 @@ def _make_locator():
         def get_source_stamp(self):
             return package_digest()
 
+        def get_disambiguator(self):
+            # the source's digest in the file names: copies of one source share them, and two
+            # sources never write the same index or data file (numba writes an index, then its
+            # data: two processes of different sources interleaving there could pair one's
+            # index with the other's code)
+            return f"{self._lineno}-{digest_tag()}"
+
         @classmethod
         def get_suitable_cache_subpath(cls, py_file):
-            inside = Path(py_file).resolve().parent.relative_to(PACKAGE_DIR.parent).as_posix()   # "nonholo/sim"
-            return f"{inside.rsplit('/', 1)[-1]}_{hashlib.sha1(inside.encode('utf-8')).hexdigest()}"
+            return subfolder(Path(py_file).resolve().parent)
 
         @classmethod
         def from_function(cls, py_func, py_file):
@@ -135,6 +185,7 @@ def _make_locator():
                 cls.root = root
                 locator = super().from_function(py_func, py_file)  # None if the folder cannot be written
                 if locator is not None:
+                    prune_once(root)
                     return locator
             cls.root = None
             return None

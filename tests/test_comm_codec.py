@@ -215,7 +215,8 @@ def test_model_validation():
         AgentID("")
 
 
-@pytest.mark.parametrize("token", ["@x", "12", "-x", "#x", "1.5", "20250101T120005000Z"])
+@pytest.mark.parametrize("token", ["@x", "12", "-x", "#x", "1.5", "20250101T120005000Z", "+1", ".5",
+                                   "+20240101T000000000"])
 def test_agent_names_and_addresses_are_words_or_strings(token):
     """spec comm.md §1.2: ``:name`` is a Word (a String accepted too) and an address is
     lexically a Word or String: a bare number, date or a token starting with @, # or - is

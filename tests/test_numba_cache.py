@@ -5,6 +5,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -181,3 +182,24 @@ def test_copies_of_one_source_share_compiled_code_and_an_edited_helper_is_not_se
     assert edited != source
     helper.write_text(edited)
     assert probe(copies[1]) == (103.0, 0)   # compiled again with the edited helper
+    assert probe(copies[0]) == (3.0, 1)     # and the other source's code is still there, its own
+
+
+def test_compiled_files_of_other_sources_go_after_two_weeks(tmp_path):
+    from nonholo.numba_cache import PRUNE_AFTER_S, digest_tag, prune_once, subfolder
+
+    folder = tmp_path / subfolder(ROOT / "nonholo" / "sim")
+    folder.mkdir()
+    old = time.time() - PRUNE_AFTER_S - 60
+    files = {name: folder / name for name in (
+        "kernel.f-10-0123456789ab.py311.nbi", "kernel.f-10-0123456789ab.py311.1.nbc",   # another source, old
+        "kernel.f-10-fedcba987654.py311.nbi",                                          # another source, recent
+        f"kernel.f-10-{digest_tag()}.py311.nbi",                                        # this source, old
+        "notes.txt")}                                                                   # not a cache file
+    for path in files.values():
+        path.write_text("x")
+    for name in ("kernel.f-10-0123456789ab.py311.nbi", "kernel.f-10-0123456789ab.py311.1.nbc",
+                 f"kernel.f-10-{digest_tag()}.py311.nbi", "notes.txt"):
+        os.utime(files[name], (old, old))
+    assert prune_once.__wrapped__(tmp_path) == 2
+    assert sorted(p.name for p in folder.iterdir()) == sorted(list(files)[2:])

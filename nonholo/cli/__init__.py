@@ -178,8 +178,9 @@ def announce_compiling(prog: str) -> None:
         def on_start(self, ev):
             if not self.said:
                 self.said = True
-                print(f"{prog}: compiling for this machine (first run after an install or update) …",
-                      file=sys.stderr, flush=True)
+                from tqdm import tqdm   # (written above an open progress bar, not through it)
+
+                tqdm.write(f"{prog}: compiling for this machine (cached for the next runs) …", file=sys.stderr)
 
         def on_end(self, ev):
             pass

@@ -271,7 +271,7 @@ class _Parser:
 
     def url(self, token: Token, depth: int) -> str:
         if token[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING) or (
-                token[0] == lex.ATOM and not lex.WORD.fullmatch(token[1])):
+                token[0] == lex.ATOM and not lex.is_word(token[1])):
             self.fail(token, "expected an address (URL): a word or a string")
         return token[1]
 
@@ -298,7 +298,7 @@ class _Parser:
             if name == "name":
                 value = self.value_token(slot)
                 if value[0] not in (lex.ATOM, lex.STRING, lex.BYTE_STRING) or not value[1] or (
-                        value[0] == lex.ATOM and not lex.WORD.fullmatch(value[1])):
+                        value[0] == lex.ATOM and not lex.is_word(value[1])):
                     self.fail(value, "agent :name must be a non-empty word or string")
                 slots["name"] = value[1]
             elif name == "addresses":

@@ -274,6 +274,22 @@ class RobotProgram:
             target[3], k1, k2, d, s.sin_floor, s.v_max, s.omega_max)
         return v, omega, 0.0, singular, sat_v, sat_w
 
+    def warm_up(self) -> None:
+        """Compile (or load from the cache) every compiled step the control loop calls, with
+        the robot's start and stand-in parent states, and forget the results: on a cold
+        cache a realtime loop's first instants would otherwise run seconds late."""
+        s = self.setup
+        x, y, theta, xi = (float(value) for value in s.start[:4])
+        latest, branch = dict(self.latest), self.branch
+        try:
+            for parent in s.parents:
+                self.latest[parent] = msg.RobotState(parent, 0, 0, 0.0, x - 1.0, y - 1.0, theta, 0.0, 0.0)
+            self._command(0, x, y, theta, xi)
+            unicycle_arc(x, y, theta, 0.0, 0.0, 0.0)
+            watchdog_step(self.watchdog, WatchdogState(), 0.0, True, 0.0, 0.0, s.dt * s.hold_every)
+        finally:
+            self.latest, self.branch = latest, branch
+
     def _guarded(self, guard: WatchdogState, age: float, new: bool, command: tuple, period: float, t: float,
                  at: float | None = None) -> tuple[WatchdogState, tuple]:
         """The watchdog's step at a control instant (spec fleet.md §5): its next state and
@@ -438,6 +454,7 @@ class RobotProgram:
 
         self.realtime = True
         self._replies = []
+        self.warm_up()   # before it subscribes: its parents start their clocks only after that
         receiver = asyncio.ensure_future(self._receive())
         s = self.setup
         try:

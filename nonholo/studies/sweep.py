@@ -302,7 +302,8 @@ def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "me
     if steps is not None:
         scenario = dataclasses.replace(scenario, dt=None, steps=steps)
     for spec, base in zip(specs, _spans(scenario, specs)[1]):   # robots and gains checked before any run
-        sweep_robots(base, [dataclasses.replace(a, values=a.values[:1]) for a in spec.axes])
+        sweep_robots(base, [dataclasses.replace(a, values=np.array([a.values.min(), a.values.max()]))
+                            for a in spec.axes])   # (a gain's rules are intervals: its extremes tell)
     if on_start is not None:
         on_start()
     payload = {"scenario": scenario, "text": text, "source": source, "steps": steps, "progress": progress,
