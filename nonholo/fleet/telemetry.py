@@ -250,7 +250,7 @@ class TelemetrySender:
 
     async def _run(self) -> None:
         backoff, rng = Backoff(), random.Random()
-        while not self._stop.is_set():
+        while True:
             client = await self._connect()
             if client is not None:
                 backoff.reset()
@@ -261,7 +261,12 @@ class TelemetrySender:
                     pass
                 finally:
                     await client.close()
-            await asyncio.sleep(backoff.next(rng))
+            if self._stop.is_set():   # one attempt after the stop: the last status ("done") if it can go
+                return
+            # the backoff ends early at the stop, so that the last status is tried at once
+            stopped = asyncio.ensure_future(self._stop.wait())
+            await asyncio.wait([stopped], timeout=backoff.next(rng))
+            stopped.cancel()
 
     async def _connect(self):
         try:
