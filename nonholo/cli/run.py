@@ -65,7 +65,8 @@ def handle(args: argparse.Namespace) -> int:
             from nonholo.view import require
 
             require("mcap")
-        recorded = bool(args.plot or args.out or args.animate or args.record or not args.json)
+        recorded = bool(args.plot or args.out or args.animate or args.record or not args.json
+                        or any(getattr(robot, "changes", ()) for robot in scenario.robots))   # (settling)
         result = simulate(scenario, record=recorded,
                           progress=False if args.quiet else None)
     except NonholoInputError as exc:
