@@ -88,6 +88,8 @@ def handle(args: argparse.Namespace) -> int:
 
 def describe(result) -> str:
     """The optimum beside the Table 5.1 gains (lines of at most 100 columns)."""
+    from nonholo.cli.run import wrap
+
     lines = [f"{result.scenario}, robot {result.robot} ({result.controller}): objective {result.objective_text}, "
              f"{result.generations} generations, {result.evaluations} evaluations"
              + (f", mean over {result.starts} starts" if result.starts > 1 else ""),
@@ -98,4 +100,4 @@ def describe(result) -> str:
         shown = ", ".join(f"{k} = {v:.4g}" for k, v in gains.items())
         lines.append(f"{label:<14}{shown[:33]:<34}{value:>12.5g}{metrics['error_mean']:>10.4g}"
                      f"{metrics['error_rms']:>10.4g}{metrics['effort']:>10.4g}")
-    return "\n".join(lines)
+    return "\n".join(wrap(line) for line in lines)
