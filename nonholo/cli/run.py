@@ -199,7 +199,8 @@ def format_summary(summary: dict) -> str:
     return "\n".join(wrap(line) for line in lines)
 
 
-_QUANTITY = re.compile(r"(\d) (?=(?:s|m|m/s|rad|rad/s|steps?|robots?|time\(s\))\b)")
+_QUANTITY = re.compile(r"(\d) (?=(?:s|m|m/s|rad|rad/s|steps?|robots?|time\(s\)|evaluations|generations|starts|"
+                       r"samples|points|inputs)\b)")
 
 
 def wrap(line: str, width: int = 100) -> str:

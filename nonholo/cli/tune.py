@@ -82,7 +82,9 @@ def handle(args: argparse.Namespace) -> int:
     else:
         print(describe(result))
     if result.bound_warning():
-        print(f"nonholo tune: {result.bound_warning()}", file=sys.stderr)
+        from nonholo.cli.run import wrap
+
+        print(wrap(f"nonholo tune: {result.bound_warning()}"), file=sys.stderr)
     return EXIT_OK
 
 
