@@ -85,12 +85,18 @@ def _fallback_dir() -> Path:
 
 
 @functools.lru_cache(maxsize=None)
+def package_sources() -> tuple[Path, ...]:
+    """Every ``.py`` file of the package, in path order (listed once per process)."""
+    return tuple(sorted(PACKAGE_DIR.rglob("*.py")))
+
+
+@functools.lru_cache(maxsize=None)
 def package_digest() -> bytes:
     """SHA-256 over every ``.py`` file of the package (its path inside the package and its
     bytes, in path order): the stamp of every nonholo function's cache index. Once per
     process (1.2 MB of source, a few ms)."""
     digest = hashlib.sha256()
-    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+    for path in package_sources():
         digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode("utf-8") + b"\0")
         try:
             digest.update(path.read_bytes())
@@ -125,7 +131,7 @@ def prune_once(root: Path) -> int:
 
     current, removed = f"-{digest_tag()}.", 0
     cutoff = time.time() - PRUNE_AFTER_S
-    folders = {subfolder(path.parent) for path in PACKAGE_DIR.rglob("*.py")}
+    folders = {subfolder(path.parent) for path in package_sources()}
     for name in folders:
         try:
             entries = list(os.scandir(root / name))

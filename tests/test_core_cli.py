@@ -112,7 +112,7 @@ def test_missing_file_and_help():
 
 
 def test_summary_lines_wrap_within_100_columns_never_between_a_number_and_its_unit():
-    from nonholo.cli.run import wrap
+    from nonholo.cli import wrap
 
     for pad in range(60, 100):
         line = "x" * pad + " run in 0.46 s, delay 0.15 s + jitter up to 0 s; beyond 0.1 s at 3.2 m/s, 7 steps"

@@ -20,8 +20,10 @@ import gc
 import importlib
 import os
 import pkgutil
+import re
 import signal
 import sys
+import textwrap
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -162,6 +164,19 @@ def build_parser() -> argparse.ArgumentParser:
         if register is not None:
             register(subparsers)
     return parser
+
+
+_QUANTITY = re.compile(r"(\d) (?=(?:s|m|m/s|rad|rad/s|steps?|robots?|time\(s\)|evaluations|generations|starts|"
+                       r"samples|points|inputs)\b)")
+
+
+def wrap(line: str, width: int = 100) -> str:
+    """``line`` wrapped to ``width`` columns (continuation lines indented), never between a
+    number and its unit."""
+    if len(line) <= width:
+        return line
+    kept = _QUANTITY.sub("\\1\u00a0", line)   # a no-break space: textwrap does not break there
+    return textwrap.fill(kept, width, subsequent_indent="    ", break_on_hyphens=False).replace("\u00a0", " ")
 
 
 def announce_compiling(prog: str) -> None:

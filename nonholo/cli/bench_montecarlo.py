@@ -45,11 +45,13 @@ def handle(args: argparse.Namespace) -> int:
         print("nonholo bench-montecarlo: --samples must be >= 1", file=sys.stderr)
         return EXIT_BAD_INPUT
     if not args.no_dask:   # before the first measurement, not after it
-        import importlib.util
+        from nonholo.errors import NonholoInputError
+        from nonholo.studies.distributed import require_dask
 
-        if importlib.util.find_spec("distributed") is None:
-            print("nonholo bench-montecarlo: the Dask run needs Dask (pip install 'nonholo[dask]'), or skip it "
-                  "with --no-dask", file=sys.stderr)
+        try:
+            require_dask()
+        except NonholoInputError as exc:
+            print(f"nonholo bench-montecarlo: {exc}, or skip the Dask run with --no-dask", file=sys.stderr)
             return EXIT_BAD_INPUT
     say = (lambda m: None) if args.json else (lambda m: print(f"  measuring {m} …", file=sys.stderr, flush=True))
     run_montecarlo(TEST1, VARY, 50, seed=0, progress=False)   # warm the JIT cache

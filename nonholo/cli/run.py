@@ -3,12 +3,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
-import textwrap
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, wrap
 
 
 def register(subparsers) -> None:
@@ -198,15 +196,3 @@ def format_summary(summary: dict) -> str:
     # long names and notes wrap (continuation lines indented): the terminal output fits 100 columns
     return "\n".join(wrap(line) for line in lines)
 
-
-_QUANTITY = re.compile(r"(\d) (?=(?:s|m|m/s|rad|rad/s|steps?|robots?|time\(s\)|evaluations|generations|starts|"
-                       r"samples|points|inputs)\b)")
-
-
-def wrap(line: str, width: int = 100) -> str:
-    """``line`` wrapped to ``width`` columns (continuation lines indented), never between a
-    number and its unit."""
-    if len(line) <= width:
-        return line
-    kept = _QUANTITY.sub("\\1\u00a0", line)   # a no-break space: textwrap does not break there
-    return textwrap.fill(kept, width, subsequent_indent="    ", break_on_hyphens=False).replace("\u00a0", " ")

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, wrap
 from nonholo.cli.montecarlo import add_dask_option
 
 
@@ -82,16 +82,12 @@ def handle(args: argparse.Namespace) -> int:
     else:
         print(describe(result))
     if result.bound_warning():
-        from nonholo.cli.run import wrap
-
         print(wrap(f"nonholo tune: {result.bound_warning()}"), file=sys.stderr)
     return EXIT_OK
 
 
 def describe(result) -> str:
     """The optimum beside the Table 5.1 gains (lines of at most 100 columns)."""
-    from nonholo.cli.run import wrap
-
     lines = [f"{result.scenario}, robot {result.robot} ({result.controller}): objective {result.objective_text}, "
              f"{result.generations} generations, {result.evaluations} evaluations"
              + (f", mean over {result.starts} starts" if result.starts > 1 else ""),

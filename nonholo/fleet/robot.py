@@ -86,6 +86,13 @@ def quantiles(values) -> dict:
             "max": float(values.max())}
 
 
+def predicted(state: msg.RobotState, age: float) -> msg.RobotState:
+    """A parent's ``state`` with its pose advanced along the exact arc of its command over
+    ``age`` s (spec fleet.md §3, ``[network] predict``)."""
+    x, y, theta = unicycle_arc(state.x, state.y, state.theta, state.v, state.omega, age)
+    return replace(state, x=x, y=y, theta=theta)
+
+
 class RobotProgram:
     """One robot: ``setup`` (its part of the scenario), ``plant`` (read pose, command v, ω;
     ``advance`` for lockstep), ``transport`` (send(frame, to=name), recv()), ``channel``
@@ -330,11 +337,8 @@ class RobotProgram:
             used = (instant - self.latest[parent].k // s.hold_every) * period
             self.ages[parent][instant] = used
             age = max(age, used)
-            if self.predict:   # the message's pose advanced along its command's arc over its age (§3)
-                state = self.latest[parent]
-                self.latest[parent] = msg.RobotState(state.robot, state.k, state.seq, state.t,
-                                                     *unicycle_arc(state.x, state.y, state.theta, state.v, state.omega,
-                                                                   used), state.v, state.omega)
+            if self.predict:
+                self.latest[parent] = predicted(self.latest[parent], used)
         return age, new
 
     def _ready(self, instant: int) -> bool:
@@ -511,10 +515,7 @@ class RobotProgram:
                         if predict:
                             # over the age the watchdog measures (spec fleet.md §3, §5): since the
                             # arrival, on this robot's clock (the sender's `t` is another machine's)
-                            px, py, ptheta = unicycle_arc(state.x, state.y, state.theta, state.v, state.omega,
-                                                          max(used, 0.0))
-                            state = msg.RobotState(state.robot, state.k, state.seq, state.t, px, py, ptheta,
-                                                   state.v, state.omega)
+                            state = predicted(state, max(used, 0.0))
                         self.latest[parent] = state
                     if s.parents and age > self.watchdog.stale_after and now - last_subscribe > SUBSCRIBE_RETRY_S:
                         last_subscribe = now    # a silent parent may have restarted: subscribe again

@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from nonholo.sim.watchdog import TICK_TOLERANCE, WatchdogConfig
+from nonholo.sim.watchdog import POSITIVE_FIELDS, TICK_TOLERANCE, WatchdogConfig
 from nonholo.tomlfile import describe_value
 
 LOST = -1               # usable instant of a lost message
@@ -112,6 +112,7 @@ def link_schedule(model: LinkModel, seed: int, parent: str, child: str, instants
 # ---------------------------------------------------------------------- a scenario's settings
 LINK_FIELDS = ("delay", "jitter", "loss", "reorder")
 WATCHDOG_FIELDS = ("stale_after", "resume_after", "decel_v", "decel_omega")
+WATCHDOG_HIGH = {"stale_after": 3600, "decel_v": 1e6, "decel_omega": 1e6}   # s, m/s², rad/s²
 # The fields of a scenario's [network] table that the link model reads (the fleet reads the
 # rest: transport, keys, addresses, failover, ...).
 FIELDS = ("seed", "links", "predict", *LINK_FIELDS, *WATCHDOG_FIELDS)
@@ -189,12 +190,12 @@ def read_link_settings(data: dict, edges, fail) -> LinkSettings:
     resume = data.get("resume_after", 3)
     if isinstance(resume, bool) or not isinstance(resume, int) or not 1 <= resume <= 1000:
         fail("network.resume_after", f"expected an integer in 1..1000, got {describe_value(resume)}")
-    limits = {}
-    for name, default, high in (("stale_after", 0.1, 3600), ("decel_v", 2.0, 1e6), ("decel_omega", 8.0, 1e6)):
-        limits[name] = _number(data, name, "network", default, high, fail)
-        if limits[name] <= 0:   # (a zero deceleration would never stop)
+    limits, defaults = {}, WatchdogConfig()
+    for name in POSITIVE_FIELDS:
+        limits[name] = _number(data, name, "network", getattr(defaults, name), WATCHDOG_HIGH[name], fail)
+        if limits[name] <= 0:
             fail(f"network.{name}", "must be positive")
-    watchdog = WatchdogConfig(limits["stale_after"], resume, limits["decel_v"], limits["decel_omega"])
+    watchdog = WatchdogConfig(resume_after=resume, **limits)
     predict = data.get("predict", False)
     if not isinstance(predict, bool):
         fail("network.predict", f"expected true or false, got {describe_value(predict)}")

@@ -253,9 +253,11 @@ class SimulationResult:
         first, second = follower.outputs
         out[f"{first}_error"] = {"mean": s(k.E_MEAN), "max": s(k.E_MAX), "final": s(k.E_FINAL)}
         out[f"{second}_error"] = {"mean": s(k.H_SUM) / samples, "max": s(k.H_MAX), "final": s(k.H_FINAL)}
-        # per change of targets; none to settle: []; changes but no record to measure them: None
-        out["settling"] = (self._settling(follower, i, member) if self.record is not None and follower.changes
-                           else [] if not follower.changes else None)
+        # per change of targets (none: nothing to settle); changes but no record to measure them: None
+        if not follower.changes:
+            out["settling"] = []
+        else:
+            out["settling"] = self._settling(follower, i, member) if self.record is not None else None
         near = s(k.NEAR)
         safety = {"min_distance": near if math.isfinite(near) else None,
                   "min_distance_time": s(k.NEAR_T) if math.isfinite(near) else None,

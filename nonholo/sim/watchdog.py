@@ -31,6 +31,11 @@ NO_EVENT, STOP, RESUME = 0, 1, 2          # ``watchdog_update``'s event codes
 EVENTS = (None, "stop", "resume")
 
 
+# The watchdog settings that must be positive: a zero age limit stops at once, a zero
+# deceleration never stops.
+POSITIVE_FIELDS = ("stale_after", "decel_v", "decel_omega")
+
+
 @dataclass(frozen=True)
 class WatchdogConfig:
     stale_after: float = 0.1    # s
@@ -39,7 +44,7 @@ class WatchdogConfig:
     decel_omega: float = 8.0    # rad/s²
 
     def __post_init__(self) -> None:
-        for name in ("stale_after", "decel_v", "decel_omega"):   # (a zero deceleration would never stop)
+        for name in POSITIVE_FIELDS:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
                 raise ValueError(f"{name} must be a positive number, got {value!r}")

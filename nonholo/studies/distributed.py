@@ -79,6 +79,14 @@ def check_address(address: str | None) -> str | None:
     return address
 
 
+def require_dask() -> None:
+    """``NonholoInputError`` naming the extra to install unless Dask's ``distributed`` imports."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise NonholoInputError(f"Dask is not installed: {INSTALL_HINT}") from None
+
+
 @contextlib.contextmanager
 def dask_client(address: str | None, workers: int = 2) -> Iterator:
     """A ``distributed.Client`` for ``address`` ("local": a ``LocalCluster`` of ``workers``
@@ -87,10 +95,9 @@ def dask_client(address: str | None, workers: int = 2) -> Iterator:
     if address is None:
         yield None
         return
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise NonholoInputError(f"Dask is not installed ({address!r} asks for it): {INSTALL_HINT}") from None
+    require_dask()
+    from distributed import Client, LocalCluster
+
     with contextlib.ExitStack() as stack:
         if address == LOCAL:
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
