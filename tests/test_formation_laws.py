@@ -121,6 +121,30 @@ def test_eq_5_9_switch_passes_behind_and_settles_in_ln50():
     assert np.hypot(x[0] - x[1], y[0] - y[1])[window].min() == pytest.approx(math.sqrt(3), abs=0.01)
 
 
+@pytest.mark.parametrize("dt", [0.01, 0.0025])
+def test_step_change_is_integrated_on_its_new_target(dt):
+    """Across a step at t = at (on the grid) the closed loop stays exactly φ̇ = k2 (φ_d − φ),
+    l̇ = k1 (l_d − l): after the step φ − φ_d = −π e^{−k2 (t − at)} to integration accuracy,
+    and l is not disturbed (spec §2.2, §6 b). The sample at t = at still shows the old target.
+    (Taking the old target at the first RK4 stage after the step left π·k2·dt/6: 5e-3 rad.)"""
+    at, k2 = 20.0, 1.3
+    change = Change(at, {"phi": math.pi / 3 + math.pi}, direction="counterclockwise")
+    formation = Formation([circle_leader(), behind(k1=0.8, k2=k2, changes=(change,))], references.circle(),
+                          duration=26.0, dt=dt)
+    result = simulate_formation(formation)
+    t = result.t
+    e_l, e_phi = result.output_errors("f1")
+    after = t > at + 1e-9
+    np.testing.assert_allclose(e_phi[after], -math.pi * np.exp(-k2 * (t[after] - at)), rtol=0, atol=1e-7)
+    at_step = np.searchsorted(t, at)
+    assert abs(e_phi[at_step]) < 1e-7     # the sample at the step: the old target, met
+    # l only goes on decaying from the start (e^{−k1 at} = 1.1e-7 m left at the step; the
+    # fast turn moves it by integration error, 2e-8 m; the old first stage moved it 2e-5 m)
+    left = abs(e_l[at_step])
+    np.testing.assert_allclose(np.abs(e_l[after]), left * np.exp(-0.8 * (t[after] - at)), rtol=0, atol=5e-8)
+    assert result.follower_metrics("f1")["settling"][0]["l_disturbance"] <= left + 5e-8
+
+
 def test_clockwise_switch_and_ambiguous_shortest():
     change = Change(5.0, {"phi": math.pi / 3 + math.pi}, direction="clockwise")
     result = simulate_formation(Formation([eight_leader(), separation_bearing("f1", "leader", 2.0, math.pi / 3,

@@ -12,9 +12,10 @@ R robots of one graph, listed so that ``order`` visits parents before children; 
 * ``rows``    (r, 10): the reference at every stage time (``REF_COLUMNS``); output step k
   with m_k sub-steps owns rows ``row_start[k] … row_start[k] + 2 m_k`` (times t_k + j h/2,
   h = dt/m_k), the last one shared with step k + 1
-* ``targets`` (r, 4, R): follower targets z1_d, z2_d and their rates at the same stage times
-  (one row when no follower's targets change); ``offsets`` (2, R, B) per-copy constant offsets
-  added to z1_d, z2_d (sweeps of l, φ)
+* ``targets`` (r, 6, R): follower targets z1_d, z2_d and their rates at the same stage times
+  (one row when no follower's targets change), then z1_d, z2_d just after each time (the first
+  stage of a sub-step reads these: ``nonholo.sim.targets.TABLE_COLUMNS``); ``offsets``
+  (2, R, B) per-copy constant offsets added to z1_d, z2_d (sweeps of l, φ)
 * topology: ``kinds`` (R,) ``ROOT_A``/``ROOT_B`` (root under law A or B), ``SEPARATION_BEARING``,
   ``SEPARATION_SEPARATION``; ``parents`` (2, R); ``feeds`` (R,) 1 where a robot has children
 * ``branch``  (R, B): each l–φ bearing on its continuous 2π branch
@@ -83,13 +84,14 @@ MAX_FIELDS = FIELDS_SIZE   # a root's law fields (at most MAX_LAW_FIELDS); a fol
 K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
- SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D, SIN_LAST,
- SIN_CROSSINGS, WATCHDOG_STOPS, WATCHDOG_STOPPED) = range(29)
-STAT_COUNT = 29   # (the last two: a follower's watchdog under a link model, counted by nonholo.sim.linkstep)
-ROBOT_STATS = FIRST_SINGULAR + 1   # the statistics of every robot (``add_sample``); the rest: formations
-# ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order.
+ SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, SAT_ANY, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D, SIN_LAST,
+ SIN_CROSSINGS, WATCHDOG_STOPS, WATCHDOG_STOPPED) = range(30)
+STAT_COUNT = 30   # (the last two: a follower's watchdog under a link model, counted by nonholo.sim.linkstep)
+ROBOT_STATS = SAT_ANY + 1   # the statistics of every robot (``add_sample``); the rest: formations
+# ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order (SAT_ANY:
+# samples where v or ω or both were clipped).
 assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
-        SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR) == tuple(range(ROBOT_STATS))
+        SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, SAT_ANY) == tuple(range(ROBOT_STATS))
 # Lone roots under continuous-time control with fewer copies than this run one at a time
 # (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
 # LLVM's run-time overlap checks (tens of comparisons) at every step.
@@ -288,19 +290,19 @@ def stage_rate(stage, xi_speed):
 
 @njit(inline="always", **_OPTIONS)
 def robot_stats(stats, r, b):
-    """A robot's running statistics, rows 0 … ``ROBOT_STATS`` − 1 (E_MEAN … FIRST_SINGULAR), as
+    """A robot's running statistics, rows 0 … ``ROBOT_STATS`` − 1 (E_MEAN … SAT_ANY), as
     a tuple (the rows after them are kept for formations only)."""
     return (stats[0, r, b], stats[1, r, b], stats[2, r, b], stats[3, r, b], stats[4, r, b], stats[5, r, b],
             stats[6, r, b], stats[7, r, b], stats[8, r, b], stats[9, r, b], stats[10, r, b], stats[11, r, b],
             stats[12, r, b], stats[13, r, b], stats[14, r, b], stats[15, r, b], stats[16, r, b], stats[17, r, b],
-            stats[18, r, b])
+            stats[18, r, b], stats[19, r, b])
 
 
 def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
     """The running statistics ``old`` (``robot_stats``) with the sample of output step k
     (time t) added: its errors, and the command in force (v, ω and its event flags)."""
     (e_mean, e_m2, e_sq, e_max, _, h_sum, h_sq, h_max, _, v_peak, v_peak_t, w_peak, w_peak_t, v_sq, w_sq, sat_v_sum,
-     sat_w_sum, singular_sum, first_singular) = old
+     sat_w_sum, singular_sum, first_singular, sat_any_sum) = old
     e = abs(err1)
     delta = e - e_mean
     mean = e_mean + delta / (k + 1.0)
@@ -309,7 +311,8 @@ def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
     return (mean, e_m2 + delta * (e - mean), e_sq + e * e, max(e_max, e), e, h_sum + heading, h_sq + heading * heading,
             max(h_max, heading), heading, max(v_peak, speed), t if speed > v_peak else v_peak_t, max(w_peak, turn),
             t if turn > w_peak else w_peak_t, v_sq + v * v, w_sq + omega * omega, sat_v_sum + sat_v,
-            sat_w_sum + sat_w, singular_sum + singular, min(first_singular, t if singular > 0.0 else np.inf))
+            sat_w_sum + sat_w, singular_sum + singular, min(first_singular, t if singular > 0.0 else np.inf),
+            sat_any_sum + max(sat_v, sat_w))
 
 
 # Compiled once per process as functions of their own (LLVM inlines them into the kernels),
@@ -325,7 +328,8 @@ def store_stats(stats, r, b, values):
     """Write a robot's running statistics (``robot_stats``, ``add_sample``) back."""
     (stats[0, r, b], stats[1, r, b], stats[2, r, b], stats[3, r, b], stats[4, r, b], stats[5, r, b], stats[6, r, b],
      stats[7, r, b], stats[8, r, b], stats[9, r, b], stats[10, r, b], stats[11, r, b], stats[12, r, b],
-     stats[13, r, b], stats[14, r, b], stats[15, r, b], stats[16, r, b], stats[17, r, b], stats[18, r, b]) = values
+     stats[13, r, b], stats[14, r, b], stats[15, r, b], stats[16, r, b], stats[17, r, b], stats[18, r, b],
+     stats[19, r, b]) = values
 
 
 @njit(inline="always", **_OPTIONS)
@@ -733,7 +737,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         weight = 0.0 if s == 0 else (half if s < 3 else h)
                         sx, sy, st = x + weight * dx, y + weight * dy, theta + weight * dtheta
                         tr = row + (s + 1) // 2 if targets.shape[0] > 1 else 0   # one row: constant targets
-                        target = (targets[tr, 0, r] + o1, targets[tr, 1, r] + o2, targets[tr, 2, r], targets[tr, 3, r])
+                        # the first stage takes the targets just after its time: a step at the
+                        # sub-step's start is integrated on its new target throughout
+                        tc = 4 if s == 0 else 0
+                        target = (targets[tr, tc, r] + o1, targets[tr, tc + 1, r] + o2, targets[tr, 2, r],
+                                  targets[tr, 3, r])
                         dx, dy, dtheta, v, omega = follower_stage(
                             kind, sx, sy, st, parent_stage(stage_pose, stage_command, s, p1, b),
                             parent_stage(stage_pose, stage_command, s, p2, b), bearing, target, k1, k2, d, sin_floor,

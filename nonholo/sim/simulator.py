@@ -36,7 +36,7 @@ from nonholo.sim import kernel as kn
 from nonholo.sim.linkstep import integrate_linked, linked
 from nonholo.sim.result import SimulationResult
 from nonholo.sim.scenario import SEPARATION_BEARING, Follower, Robot, Scenario
-from nonholo.sim.targets import target_table
+from nonholo.sim.targets import TABLE_COLUMNS, target_table
 
 STABLE_STEP_FACTOR = 0.5
 MEASURED_STEP_FACTOR = 0.05
@@ -176,7 +176,7 @@ class Group:
         """Follower targets at ``times`` (one row if none of them changes)."""
         if not any(isinstance(r, Follower) and r.changes for r in self.robots):
             times = times[:1]
-        table = np.zeros((times.size, 4, len(self.robots)))
+        table = np.zeros((times.size, len(TABLE_COLUMNS), len(self.robots)))
         for j, robot in enumerate(self.robots):
             if isinstance(robot, Follower):
                 table[:, :, j] = target_table(robot, times)
@@ -261,8 +261,9 @@ def _reference_survey(scenario: Scenario):
 
 
 def _check_finite(scenario: Scenario, rows: np.ndarray) -> None:
-    if np.isfinite(rows.sum()):   # no inf or NaN in the sum: none in the rows (an overflow is checked below)
-        return
+    with np.errstate(invalid="ignore", over="ignore"):   # (inf − inf in the sum is what is looked for)
+        if np.isfinite(rows.sum()):   # no inf or NaN in the sum: none in the rows (an overflow is checked below)
+            return
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
         raise InfeasibleReferenceError(
@@ -408,7 +409,7 @@ def _whole(group: Group, n_robots: int, n_members: int) -> bool:
 class PlannedGroup:
     """A group of a sampled-data run with what ``simulate`` integrates it on: ``plan`` the RK4
     sub-steps of every output step, ``rows`` (N+1, 10) the reference and ``targets``
-    (N+1, 4, R) the follower targets at the output instants, taken from the same stage
+    (N+1, 6, R) the follower targets at the output instants, taken from the same stage
     tables (so a robot program that reads them computes bit for bit what the kernel does)."""
 
     def __init__(self, group: Group, plan: np.ndarray, rows: np.ndarray, targets: np.ndarray):
@@ -552,7 +553,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
             cache_[key] = (_reference_rows(scenario, times), row_start, times)
             trim_reference_cache(cache_, key)
         rows, row_start, times = cache_[key]
-        targets = group.targets(times) if group.followers else np.zeros((1, 4, n_robots))
+        targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), n_robots))
         state, branch = start.copy(), group.initial_branches()
         stats, pair_stats = kn.new_stats(n_robots, n_batch)
         records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))

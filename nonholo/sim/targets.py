@@ -2,11 +2,16 @@
 spec follower-posture.md §2.5, erratum 22).
 
 The targets z_d(t) of a follower and their rates ż_d(t) are evaluated into a table at
-every RK4 stage time, like the leader's reference. A step switches for t > at: the RK4
-step that ends at ``at`` integrates the old target throughout, the sample at t = at still
-shows it, and so does the first stage (t = at itself) of the step that starts there; its
-other three stages see the new target. (Thesis Eq 5.9 with dt = 0.01 s: the error just
-after the switch is 0.005 rad off an ideal step; a ramp has no such effect.) A ramp follows
+every RK4 stage time, like the leader's reference. A step switches for t > at: the sample
+at t = at still shows the old target (its error is the old target's), as does a control
+instant at t = at under sampled-data control (the new target is used from the next one).
+Under continuous-time control the RK4 step that ends at ``at`` integrates the old target
+throughout and the step that starts there the new one throughout: its first stage, at t =
+at itself, takes the target just after ``at`` (the table's ``_after`` columns), so a step on
+the output grid (or on a sub-step boundary) is integrated as exactly as the rest of the
+run. (Taking the old target at that stage, as nonholo did before, left a first-order error:
+thesis Eq 5.9 with dt = 0.01 s ended 9 mm and 0.005 rad off the ideal step.) A step inside
+a sub-step takes effect at the next stage time. A ramp follows
 the quintic smoothstep s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, τ = (t − at)/T, whose rate
 ż_d = Δ s'(τ)/T is fed forward, so the output error of an exact follower stays zero.
 
@@ -23,7 +28,10 @@ import numpy as np
 from nonholo.errors import FormationError
 
 TAU = 2.0 * math.pi
-TABLE_COLUMNS = ("output_1_d", "output_2_d", "output_1_d_rate", "output_2_d_rate")
+TABLE_COLUMNS = ("output_1_d", "output_2_d", "output_1_d_rate", "output_2_d_rate", "output_1_d_after",
+                 "output_2_d_after")
+"""A target table's columns: the targets and their rates at each time (a step counted from
+just after its time), then the targets just after each time (a step counted at its time)."""
 EVENT_TOLERANCE = 1e-9
 # |Δφ| this close to π is ambiguous under "shortest" (spec §2.5): the turn is decided by round-off.
 AMBIGUOUS_TURN = 1e-6
@@ -75,22 +83,28 @@ def target_segments(follower) -> list[list[tuple[float, float, float, float]]]:
 
 
 def target_table(follower, times: np.ndarray) -> np.ndarray:
-    """(len(times), 4): output targets and their rates (``TABLE_COLUMNS``) at ``times``."""
+    """(len(times), 6): output targets and their rates at ``times``, then the targets just
+    after ``times`` (``TABLE_COLUMNS``; the two differ only at a step's own time)."""
     times = np.asarray(times, dtype=float)
-    table = np.zeros((times.size, 4))
+    table = np.zeros((times.size, len(TABLE_COLUMNS)))
     for output, segments in enumerate(target_segments(follower)):
         value = np.full(times.size, follower.targets[output])
+        value_after = value.copy()
         rate = np.zeros(times.size)
         for at, start, end, ramp in segments:
-            after = times > at + EVENT_TOLERANCE * max(1.0, abs(at))
+            tolerance = EVENT_TOLERANCE * max(1.0, abs(at))
+            after, from_on = times > at + tolerance, times > at - tolerance
             if ramp == 0.0:
                 value = np.where(after, end, value)
-            else:
+                value_after = np.where(from_on, end, value_after)
+            else:   # (continuous: the same either way)
                 tau = (times - at) / ramp
                 value = np.where(after, start + (end - start) * smoothstep(tau), value)
+                value_after = np.where(from_on, start + (end - start) * smoothstep(np.maximum(tau, 0.0)), value_after)
                 rate = rate + (end - start) * smoothstep_rate(tau) / ramp
         table[:, output] = value
         table[:, 2 + output] = rate
+        table[:, 4 + output] = value_after
     return table
 
 
