@@ -9,6 +9,7 @@ from nonholo.control.registry import controller
 from nonholo.errors import InfeasibleReferenceError, NonholoInputError
 from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
+from nonholo.sim import kernel as kn
 from nonholo.sim.simulator import simulate, stage_times
 
 
@@ -54,6 +55,25 @@ def test_saturation_limits_and_counts():
     result = simulate(Scenario(references.circle(), [robot], duration=30.0, dt=0.01))
     assert result.metrics.peak_v[0] <= 1.0 and result.metrics.peak_omega[0] <= 0.5
     assert result.metrics.saturated_v[0] > 0
+
+
+@pytest.mark.parametrize("record", [True, False])
+def test_saturated_samples_count_samples_where_either_command_was_clipped(record):
+    """``saturated_samples``: samples with v, ω or both clipped — not the larger of the two
+    counts (here they overlap only in part), in batches too."""
+    robot = Robot("r", controller("nonlinear", zeta=0.7, b=3.0), (0.0, 0.0, 3.0), v_max=1.5, omega_max=0.4)
+    scenario = Scenario(references.circle(radius=3.0, period=20.0), [robot], duration=30.0, dt=0.01)
+    recorded = simulate(scenario)
+    v, omega = np.abs(recorded.v[0]), np.abs(recorded.omega[0])
+    at_v, at_w = v >= 1.5 * (1 - 1e-12), omega >= 0.4 * (1 - 1e-12)
+    assert 0 < (at_v & at_w).sum() < min(at_v.sum(), at_w.sum())    # the counts overlap in part
+    events = simulate(scenario, record=record).to_dict()["robots"]["r"]["events"]
+    assert events["saturated_v_samples"] == at_v.sum() and events["saturated_omega_samples"] == at_w.sum()
+    assert events["saturated_samples"] == (at_v | at_w).sum()
+    assert events["saturated_fraction"] == pytest.approx((at_v | at_w).mean(), rel=1e-12)
+    batch = simulate([scenario] * 5, record=record)   # (the batch kernel's own statistics)
+    assert np.all(batch.stats[kn.SAT_ANY, 0] == (at_v | at_w).sum())
+    assert np.all(batch.stats[kn.SAT_V, 0] == at_v.sum()) and np.all(batch.stats[kn.SAT_W, 0] == at_w.sum())
 
 
 def test_sampled_data_control_holds_the_command():

@@ -53,7 +53,8 @@ class Metrics:
     std (ddof 0), var, rms, max, final. ``heading_*``: a root's |wrap(θ_d − θ)| (rad), a
     follower's |z2 − z2_d|: mean, rms, max, final. ``peak_v``, ``peak_omega``, ``rms_v``,
     ``rms_omega``: commands applied (after saturation); ``effort`` = duration · mean(v² + ω²).
-    ``saturated_v``/``saturated_omega``: samples at which the limit clipped the command;
+    ``saturated_v``/``saturated_omega``: samples at which the limit clipped v / ω, ``saturated``
+    those at which it clipped either (or both);
     ``singular``: samples at which a singularity guard acted, ``first_singular`` its first
     time (inf if never).
     """
@@ -75,6 +76,7 @@ class Metrics:
     effort: np.ndarray
     saturated_v: np.ndarray
     saturated_omega: np.ndarray
+    saturated: np.ndarray
     singular: np.ndarray
     first_singular: np.ndarray
 
@@ -90,6 +92,7 @@ class Metrics:
             rms_v=np.sqrt(stats[k.V_SQ] / samples), rms_omega=np.sqrt(stats[k.W_SQ] / samples),
             effort=duration * (stats[k.V_SQ] + stats[k.W_SQ]) / samples,
             saturated_v=stats[k.SAT_V].astype(np.int64), saturated_omega=stats[k.SAT_W].astype(np.int64),
+            saturated=stats[k.SAT_ANY].astype(np.int64),
             singular=stats[k.SINGULAR].astype(np.int64), first_singular=stats[k.FIRST_SINGULAR],
         )
 
@@ -103,7 +106,7 @@ class Metrics:
                         "effort": float(self.effort[i])},
             "events": {"saturated_v_samples": int(self.saturated_v[i]),
                        "saturated_omega_samples": int(self.saturated_omega[i]),
-                       "saturated_fraction": float(max(self.saturated_v[i], self.saturated_omega[i]) / samples),
+                       "saturated_fraction": float(self.saturated[i] / samples),
                        "singular_samples": int(self.singular[i]),
                        "first_singular_time": _none_if_inf(self.first_singular[i])},
         }
@@ -203,9 +206,9 @@ class SimulationResult:
 
     def _events(self, i: int, member: int) -> dict:
         samples = self.t.size
-        sat_v, sat_w = self._stat(k.SAT_V, i, member), self._stat(k.SAT_W, i, member)
+        sat_v, sat_w, sat = (self._stat(name, i, member) for name in (k.SAT_V, k.SAT_W, k.SAT_ANY))
         out = {"saturated_v_samples": int(sat_v), "saturated_omega_samples": int(sat_w),
-               "saturated_fraction": max(sat_v, sat_w) / samples, "saturated_samples": int(max(sat_v, sat_w)),
+               "saturated_fraction": sat / samples, "saturated_samples": int(sat),
                "singular_samples": int(self._stat(k.SINGULAR, i, member)),
                "first_singular_time": _none_if_inf(self._stat(k.FIRST_SINGULAR, i, member))}
         scenario = self.scenarios[member]
@@ -346,7 +349,10 @@ class SimulationResult:
     def table(self, member: int = 0, every: int = 1):
         """Tidy per-sample rows (one per robot and sample): ``(header, rows)`` with the
         columns ``t, robot, role, x, y, theta, xi, v, omega, error_1, error_2`` (units in
-        ``TABLE_COLUMNS``); ``every`` keeps one sample in that many."""
+        ``TABLE_COLUMNS``); ``every`` keeps one sample in that many. The errors depend on the
+        role: a root's (tracking or posture) position error norm ‖p_d − p‖ in m and heading error
+        wrap(θ_d − θ) in rad; a follower's output errors z − z_d (l − l_d in m and φ − φ_d in rad,
+        or l1 − l1_d and l2 − l2_d in m), signed as ``output_errors``."""
         record = self._recorded()[:, ::every, :, member]
         times = self.t[::every]
         header = ["t", "robot", "role"] + [c[0] for c in TABLE_COLUMNS]

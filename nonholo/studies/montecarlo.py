@@ -252,7 +252,7 @@ def sample_metrics(result, saturation_share: float) -> dict:
     stats, samples = result.stats, result.t.size
     members = stats.shape[2]
     m = Metrics.from_stats(stats, samples, float(result.t[-1]))
-    saturated = np.maximum(stats[kn.SAT_V], stats[kn.SAT_W]) / samples
+    saturated = stats[kn.SAT_ANY] / samples
     per_robot = {"error_mean": m.error_mean, "error_rms": m.error_rms, "error_max": m.error_max,
                  "error_final": m.error_final, "heading_rms": m.heading_rms, "heading_max": m.heading_max,
                  "peak_v": m.peak_v, "peak_omega": m.peak_omega, "effort": m.effort, "saturated_share": saturated,

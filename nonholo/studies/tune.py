@@ -64,7 +64,7 @@ class Objective:
     def values(self, stats: np.ndarray, samples: int, duration: float) -> np.ndarray:
         """The objective per member of a robot's statistics (STAT_COUNT, members)."""
         m = Metrics.from_stats(stats, samples, duration)
-        saturation = np.maximum(m.saturated_v, m.saturated_omega) / samples
+        saturation = m.saturated / samples
         term = {"mean": m.error_mean, "rms": m.error_rms, "max": m.error_max, "final": m.error_final,
                 "ise": duration * m.error_rms ** 2, "effort": m.effort, "saturation": saturation,
                 "heading": m.heading_rms}
