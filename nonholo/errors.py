@@ -23,7 +23,10 @@ class ScenarioError(NonholoInputError):
 
 
 class ExpressionError(NonholoInputError):
-    """A mathematical expression string that cannot be parsed safely."""
+    """A mathematical expression string that cannot be parsed safely. ``formula`` names the
+    formula at fault (for example ``"y"`` of a reference) when one is (``formula_of``)."""
+
+    formula: str | None = None
 
 
 class InfeasibleReferenceError(NonholoInputError):

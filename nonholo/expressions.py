@@ -94,6 +94,18 @@ _SHOWN = 60  # characters of a formula quoted in a message
 _BUDGET = threading.local()  # .active: a symbolic budget runs in this thread; .counter: its tracer
 
 
+@contextmanager
+def formula_of(label: str | None):
+    """Tag an ``ExpressionError`` raised inside with the formula it is about (``label``),
+    unless an inner one already did: a file reader then points to that formula's field."""
+    try:
+        yield
+    except ExpressionError as exc:
+        if label and exc.formula is None:
+            exc.formula = label
+        raise
+
+
 def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None = None) -> sp.Expr:
     """The sympy expression written in ``text``; ``names`` maps the allowed names to
     symbols or values. ``label`` (for example ``"x"``) names the formula in messages.
@@ -102,6 +114,11 @@ def parse_expression(text: str, names: Mapping[str, sp.Expr], label: str | None 
     >>> parse_expression("6*sin(t/15 + 0.3) + 0.2*t", {"t": t})
     t/5 + 6*sin(t/15 + 3/10)
     """
+    with formula_of(label):
+        return _parsed(text, names, label)
+
+
+def _parsed(text: str, names: Mapping[str, sp.Expr], label: str | None) -> sp.Expr:
     if not isinstance(text, str):
         raise ExpressionError(f"expected a formula (a string), got {describe_value(text)}"
                               + (f" for {label}" if label else ""))

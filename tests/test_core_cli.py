@@ -83,7 +83,7 @@ BAD = [
     (GOOD.replace("dt = 0.01", "dt = 0"), "simulation.dt: expected a positive number, got 0"),
     (GOOD.replace("dt = 0.01", 'dt = "fast"'), "simulation.dt: expected a finite number, got str 'fast'"),
     (GOOD.replace("start = [0.0, 0.5, 0.0]", "start = [0.0, 0.5]"), "robots[0].start: expected a list of 3 finite numbers"),
-    (GOOD.replace('x = "6*sin(t/15 + 0.3) + 0.2*t"', 'x = "__import__(1)"'), "reference: unknown function '__import__'"),
+    (GOOD.replace('x = "6*sin(t/15 + 0.3) + 0.2*t"', 'x = "__import__(1)"'), "reference.x: unknown function '__import__'"),
     (GOOD.replace('kind = "expression"', 'kind = "spiral"'), "reference.kind: unknown value 'spiral'"),
     (GOOD.replace("kp = 1.0", "kp = -1.0"), "robots[0].gains: gain 'kp1' of dynamic-feedback must be > 0, got -1"),
     (GOOD.replace("[simulation]", "[simulation]\nspeed = 3"), "simulation.speed: unknown field"),

@@ -430,7 +430,7 @@ def test_a_million_element_start_is_refused_by_size_in_one_short_line(tmp_path):
 
 
 @pytest.mark.parametrize("reference, fragment", [
-    ('kind = "expression"\nx = "10**10**10"\ny = "t"', "reference: '10**10**10': exponent 10000000000 is too large"),
+    ('kind = "expression"\nx = "10**10**10"\ny = "t"', "reference.x: '10**10**10': exponent 10000000000 is too large"),
     ('kind = "expression"\nx = "' + "t" * 900_000 + '"\ny = "t"', "formula longer than 10,000 characters"),
     ('kind = "expression"\nx = "t\\u0000"\ny = "t"', "control character U+0000"),
     ('kind = "expression"\nx = "Abs(t - 3)"\ny = "t"', "first at t = 3 s"),

@@ -24,7 +24,7 @@ import numpy as np
 import sympy as sp
 
 from nonholo.errors import ExpressionError, InfeasibleReferenceError, ScenarioError
-from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number,
+from nonholo.expressions import (MAX_NAME_LENGTH, RESERVED_NAMES, check_constants, check_name, exact_number, formula_of,
                                  expression_size, parse_expression, quote, symbolic_budget, sympy_failures)
 from nonholo.numerics import array_sincos
 from nonholo.references.base import FORWARD, Reference
@@ -60,11 +60,16 @@ class ExpressionReference(Reference):
     def __init__(self, x: sp.Expr, y: sp.Expr, direction: int = FORWARD,
                  default_duration: float | None = None, parameters: Mapping[str, float] | None = None):
         super().__init__(direction, default_duration)
-        self.x_expr = _formula(x, "x")
-        self.y_expr = _formula(y, "y")
+        with formula_of("x"):
+            self.x_expr = _formula(x, "x")
+        with formula_of("y"):
+            self.y_expr = _formula(y, "y")
         self.parameters = dict(parameters or {})
         with sympy_failures(f"x = {quote(str(self.x_expr))}, y = {quote(str(self.y_expr))}"):
-            derivatives = [_derivatives(expr, label) for expr, label in ((self.x_expr, "x"), (self.y_expr, "y"))]
+            derivatives = []
+            for expr, label in ((self.x_expr, "x"), (self.y_expr, "y")):
+                with formula_of(label):
+                    derivatives.append(_derivatives(expr, label))
             (x0, x1, x2), (y0, y1, y2) = derivatives
             self._exprs = (x0, y0, x1, y1, x2, y2)
             self._check_smooth()

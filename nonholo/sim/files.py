@@ -194,8 +194,9 @@ class _Reader:
             return references.THESIS_TESTS[kind](direction=direction, **params)
         except ScenarioError as exc:   # the reference names its own field: point to it in the file
             self.fail(f"reference.{exc.field}" if exc.field else "reference", exc.problem)
-        except ValueError as exc:   # NonholoInputError included
-            self.fail("reference", str(exc))
+        except ValueError as exc:   # NonholoInputError included; a formula's own error names it
+            formula = getattr(exc, "formula", None)
+            self.fail(f"reference.{formula}" if formula in data else "reference", str(exc))
 
     def _parameter(self, value, field: str, kind: str):
         if kind == "number":
@@ -241,8 +242,15 @@ class _Reader:
         name = self.string(data.get("name", f"robot{index}"), f"{where}.name")
         posture = "goal" in data
         family = POSTURE_CONTROLLERS if posture else CONTROLLERS
-        controller_name = self.string(data.get("controller", "polar" if posture else "dynamic-feedback"),
-                                      f"{where}.controller", tuple(family))
+        chosen = data.get("controller", "polar" if posture else "dynamic-feedback")
+        if chosen in POSTURE_CONTROLLERS and not posture:   # the law exists: say what it lacks
+            self.fail(f"{where}.goal", f"missing: the posture law {chosen} stabilises to a goal [x, y, theta] "
+                                       "(a tracking root follows [reference] with one of "
+                                       f"{', '.join(CONTROLLERS)})")
+        if chosen in CONTROLLERS and posture:
+            self.fail(f"{where}.controller", f"{chosen} is a tracking law; a robot with a goal needs a posture law "
+                                             f"({', '.join(POSTURE_CONTROLLERS)})")
+        controller_name = self.string(chosen, f"{where}.controller", tuple(family))
         spec = family[controller_name]
         gains = dict(self.table(data.get("gains", {}), f"{where}.gains"))
         variant = gains.pop("variant", None) if isinstance(gains.get("variant"), str) else None

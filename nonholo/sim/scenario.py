@@ -227,6 +227,23 @@ class Scenario:
             raise FormationError(tracking.name, "controller", "a tracking root needs a [reference]")
         self._check_grid()
         check_graph(self)
+        if any(isinstance(r, Follower) and r.start is not None for r in self.robots):
+            self._check_starts()
+
+    def _check_starts(self) -> None:
+        """A follower may not start with its castor point on a parent's axle centre: l = 0,
+        where the bearing and the link laws are undefined (spec follower-posture.md §2.4)."""
+        poses = dict(zip(self.names, self.initial_poses()))
+        for robot in self.followers:
+            x, y, theta = poses[robot.name]
+            cx, cy = x + robot.d * math.cos(theta), y + robot.d * math.sin(theta)
+            for parent in robot.leaders:
+                px, py, _ = poses[parent]
+                if math.hypot(cx - px, cy - py) <= 1e-9 * max(1.0, robot.d):
+                    raise FormationError(robot.name, "start", f"its castor point (d = {robot.d:g} m ahead of its "
+                                                              f"axle) starts on {parent}'s axle centre: l = 0, where "
+                                                              "the bearing and the formation laws are undefined; "
+                                                              "start it elsewhere")
 
     def _check_grid(self) -> None:
         duration = self.duration
