@@ -114,7 +114,9 @@ def test_sigterm_or_sighup_ends_the_launcher_as_ctrl_c_does(launched, signum):
     _, err = launcher.communicate(timeout=END_S + 5.0)
     assert launcher.returncode == 128 + signum
     lines = err.decode(errors="replace").strip().splitlines()
-    assert lines == [f"nonholo fleet: ended by {signal.Signals(signum).name}; every process it started was stopped"]
+    # what it started (a line for logs), then how it ended
+    assert lines == [f"nonholo fleet: {len(NAMES)} robot programs (tcp, realtime), 60 s of robot time",
+                     f"nonholo fleet: ended by {signal.Signals(signum).name}; every process it started was stopped"]
     assert wait_until(lambda: not any(alive(pid) for pid in pids), END_S)
     assert not folder.exists()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import threading
 from pathlib import Path
 
 from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, signals_interrupt
@@ -27,6 +28,7 @@ def register(subparsers) -> None:
     add_mode_option(parser)
     add_simulation_overrides(parser)
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no start line")
     parser.add_argument("--out", metavar="DIR",
                         help="write result.json, trajectories.csv, plot.png and network.png (link health) to DIR")
     from nonholo.cli.view import add_fleet_view_arguments
@@ -62,10 +64,24 @@ def run_and_report(args: argparse.Namespace, viewing) -> int:
         config = viewing.network(config, scenario.names)      # --keys, --observe
         transport = args.transport or config.transport
         viewing.start()
-        with signals_interrupt():   # SIGTERM, SIGHUP: every robot process reaped, as on Ctrl-C
-            run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
-                            overrides=overrides, observer=viewing.observer, speed=viewing.speed,
-                            observe=viewing.observe)
+        observer = viewing.observer
+        if not args.quiet and observer is None and args.observe is None and sys.stderr.isatty():
+            observer = FleetProgress(scenario)   # a bar of the robot time the slowest robot has reached
+
+        def announce():   # once the inputs are checked (a bad one: one line), what starts
+            if not args.quiet:
+                print(f"nonholo fleet: {len(scenario.names)} robot programs ({transport}, {args.mode}), "
+                      f"{scenario.duration:g} s of robot time", file=sys.stderr)
+            if isinstance(observer, FleetProgress):
+                observer.open()
+        try:
+            with signals_interrupt():   # SIGTERM, SIGHUP: every robot process reaped, as on Ctrl-C
+                run = run_fleet(scenario, transport=transport, mode=args.mode, config=config, source=source,
+                                overrides=overrides, observer=observer, speed=viewing.speed,
+                                observe=viewing.observe, on_start=announce)
+        finally:
+            if isinstance(observer, FleetProgress):
+                observer.close()
     except NonholoInputError as exc:
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -95,3 +111,49 @@ def run_and_report(args: argparse.Namespace, viewing) -> int:
     sys.stdout.flush()
     viewing.serve()
     return EXIT_OK
+
+
+class FleetProgress:
+    """An observer of a fleet run (as ``nonholo.view.feed.FleetObserver``) that shows a
+    progress bar: the robot time the slowest robot has reached, from the robots' statuses
+    (robot processes) or from the programs themselves (in process)."""
+
+    period_s = 0.2
+
+    def __init__(self, scenario) -> None:
+        self.scenario = scenario
+        self.reached = dict.fromkeys(scenario.names, 0.0)
+        self._lock = threading.Lock()
+        self.bar = None
+
+    def open(self) -> None:
+        """Show the bar (once the run starts)."""
+        from tqdm import tqdm
+
+        s = self.scenario
+        with self._lock:
+            self.bar = tqdm(total=s.duration, unit="s", file=sys.stderr, desc=f"{s.name}: {len(s.names)} robots",
+                            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:g} s of robot time "
+                                       "[{elapsed}<{remaining}]")
+
+    def _show(self) -> None:
+        if self.bar is not None:
+            self.bar.n = min(self.reached.values())
+            self.bar.refresh()
+
+    def __call__(self, programs) -> None:
+        from nonholo.fleet.telemetry import program_step
+
+        for program in programs:
+            self.reached[program.setup.name] = max(program_step(program), 0) * program.setup.dt
+        self._show()
+
+    def status(self, name: str, status: dict) -> None:
+        with self._lock:   # (from the observer endpoint's thread)
+            self.reached[name] = status["t"] or 0.0
+            self._show()
+
+    def close(self) -> None:
+        with self._lock:
+            if self.bar is not None:
+                self.bar.close()

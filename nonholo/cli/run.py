@@ -65,8 +65,10 @@ def handle(args: argparse.Namespace) -> int:
             require("mcap")
         recorded = bool(args.plot or args.out or args.animate or args.record or not args.json
                         or any(getattr(robot, "changes", ()) for robot in scenario.robots))   # (settling)
-        result = simulate(scenario, record=recorded,
-                          progress=False if args.quiet else None)
+        try:
+            result = simulate(scenario, record=recorded, progress=False if args.quiet else None)
+        except NonholoInputError as exc:   # found while simulating (an infeasible reference, too stiff a law)
+            raise NonholoInputError(f"{source}: {exc}") from None
     except NonholoInputError as exc:
         print(f"nonholo run: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -126,6 +128,15 @@ def _fit(value: float, width: int = 7) -> str:
     return f"{value:>{width}.0e}"
 
 
+def _labelled(name: str, law: str, rows: list[str]) -> list[str]:
+    """Table lines of one robot: its name and law in the first columns of its first row, or,
+    when either is longer than its column, on a line of their own above rows that leave those
+    columns blank (a name is never cut: two robots must not look alike)."""
+    if len(name) <= 16 and len(law) <= 26:
+        return [f"{name:<16} {law:<26} {rows[0]}".rstrip()] + [f"{'':<43} {row}".rstrip() for row in rows[1:]]
+    return [f"{name}: {law}"] + [f"{'':<43} {row}".rstrip() for row in rows]
+
+
 def format_summary(summary: dict) -> str:
     """A terminal summary (at most 100 columns): a line per robot, then safety."""
     sim = summary["simulation"]
@@ -141,10 +152,10 @@ def format_summary(summary: dict) -> str:
         if robot["role"] == "follower":
             f = robot["formation"]
             law = f"{'l-phi' if f['law'] == 'separation-bearing' else 'l-l'} of {', '.join(f['leaders'])}"
-            for j, (key, e) in enumerate((k, v) for k, v in f.items() if k.endswith("_error")):
-                label = key[:-6] + (" (rad)" if key == "phi_error" else " (m)")
-                lines.append(f"{name if j == 0 else '':<16.16} {law if j == 0 else '':<26.26} {label:<10} "
-                             f"{_g(e['mean'])} {_g(e['max'])} {_g(e['final'])} {peaks if j == 0 else ''}".rstrip())
+            rows = [f"{key[:-6] + (' (rad)' if key == 'phi_error' else ' (m)'):<10} {_g(e['mean'])} {_g(e['max'])} "
+                    f"{_g(e['final'])} {peaks if j == 0 else ''}"
+                    for j, (key, e) in enumerate((k, v) for k, v in f.items() if k.endswith("_error"))]
+            lines += _labelled(name, law, rows)
             s = f["safety"]
             extra = f", min |sin(g1-g2)| {s['min_abs_sin_gamma_difference']:.3g}" if "min_abs_sin_gamma_difference" in s \
                 else ""
@@ -161,14 +172,14 @@ def format_summary(summary: dict) -> str:
                 notes.append(f"{name}: change at {change['at']:g} s ({change['mode']}): {', '.join(parts)}")
         elif "posture" in robot:
             p = robot["posture"]
-            lines.append(f"{name:<16.16} {robot['controller']:<26.26} {'goal (m)':<10} {'':>9} "
-                         f"{_g(p['position_error']['max'])} {_g(p['position_error']['final'])} {peaks}")
+            lines += _labelled(name, robot["controller"], [f"{'goal (m)':<10} {'':>9} {_g(p['position_error']['max'])} "
+                                                          f"{_g(p['position_error']['final'])} {peaks}"])
             notes.append(f"{name}: goal distance final {p['position_error']['final']:.3g} m, heading error final "
                          f"{p['heading_error']['final']:.3g} rad" + (f" ({p['note']})" if "note" in p else ""))
         else:
             e = robot["error"]
-            lines.append(f"{name:<16.16} {robot['controller']:<26.26} {'error (m)':<10} {_g(e['mean'])} "
-                         f"{_g(e['max'])} {_g(e['final'])} {peaks}")
+            lines += _labelled(name, robot["controller"], [f"{'error (m)':<10} {_g(e['mean'])} {_g(e['max'])} "
+                                                          f"{_g(e['final'])} {peaks}"])
         events = []
         if ev["saturated_v_samples"] or ev["saturated_omega_samples"]:
             events.append(f"saturated {100 * ev['saturated_fraction']:.1f}% of samples")

@@ -56,7 +56,7 @@ def check_observe(observe: str | None, transport: str) -> None:
 def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep", wait_s: float = 20.0,
               config: NetworkConfig | None = None, source: Path | None = None,
               overrides: dict | None = None, observer=None, speed: float | None = None,
-              observe: str | None = None) -> FleetRun:
+              observe: str | None = None, on_start=None) -> FleetRun:
     """Run ``scenario`` as a fleet. Robot processes (``tcp``) read the scenario from the
     file ``source`` with ``overrides`` ({"duration", "dt", "control_period"}) applied, which
     must give ``scenario``.
@@ -69,7 +69,8 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     must not block: a live view publishes a snapshot. ``speed``: pace the logical time of a
     lockstep run at this many times wall time (None: as fast as the robots go).
     ``observe`` ("host:port", robot processes only): the robots send their statuses there,
-    to a viewer attached there (``nonholo view --attach``)."""
+    to a viewer attached there (``nonholo view --attach``). ``on_start()``, if given, is called
+    once the inputs are checked, before the robots start."""
     if transport not in TRANSPORTS:
         raise NonholoInputError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
     if mode not in MODES:
@@ -90,6 +91,13 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     helds = np.zeros((n, kn.HELD_COUNT, len(scenario.robots)))
     index = {name: i for i, name in enumerate(scenario.names)}
     reports = []
+    if transport != "inproc":
+        if source is None:
+            raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
+        if config.keys is not None:   # a bad key file is bad input, found before any process starts
+            keys_from_file(config.keys, scenario.names, scenario.names)
+    if on_start is not None:
+        on_start()
     if observer is not None and hasattr(observer, "prepare"):
         observer.prepare(scenario, setups)
     if transport == "inproc":
@@ -98,10 +106,6 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
             helds[:, :, program.setup.index] = program.helds
             reports.append(program.report())
     else:
-        if source is None:
-            raise NonholoInputError(f"transport {transport}: robot processes need the scenario file")
-        if config.keys is not None:   # a bad key file is bad input, found before any process starts
-            keys_from_file(config.keys, scenario.names, scenario.names)
         run_s = wait_s + 30.0 + 0.01 * n * len(scenario.robots)
         if mode == "realtime":
             run_s += scenario.duration
