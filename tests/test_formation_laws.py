@@ -270,3 +270,12 @@ def test_batch_matches_single_runs_and_solve_ivp():
                                          method="solve_ivp"))
     np.testing.assert_allclose(scipy.output_errors("f1")[1], batch.output_errors("f1", 0)[1], atol=1e-7)
     np.testing.assert_allclose(scipy.trajectory("x"), batch.trajectory("x", 0), atol=1e-7)
+
+
+def test_castor_point_starting_on_a_parents_axle_centre_is_bad_input():
+    """l(0) = 0: the bearing and the link laws are undefined there (spec §2.4)."""
+    on_axle = separation_bearing("f1", "leader", 2.0, math.pi / 3, d=1.0, start=(-1.0, 0.0, 0.0), start_frame="leader")
+    with pytest.raises(FormationError, match="castor point .* starts on leader's axle centre"):
+        Formation([circle_leader(), on_axle], references.circle(), duration=1.0)
+    off_axle = separation_bearing("f1", "leader", 2.0, math.pi / 3, d=1.0, start=(-1.0, 1e-6, 0.0), start_frame="leader")
+    Formation([circle_leader(), off_axle], references.circle(), duration=1.0)   # accepted

@@ -88,6 +88,9 @@ def run_and_report(args: argparse.Namespace, viewing) -> int:
     except SimulationError as exc:
         print(f"nonholo fleet: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except OSError as exc:   # no local endpoint, no processes: the machine's limits, said on one line
+        print(f"nonholo fleet: cannot run the fleet: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     summary = run.to_dict()
     try:
         if args.out:

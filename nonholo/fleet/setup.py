@@ -12,6 +12,7 @@ from nonholo.errors import NonholoInputError
 from nonholo.sim import kernel as kn
 from nonholo.sim.scenario import Robot, Scenario
 from nonholo.sim.simulator import planned_groups
+from nonholo.sim.targets import TABLE_COLUMNS
 
 ROOT, BEARING, PAIR = "root", "separation-bearing", "separation-separation"
 
@@ -22,8 +23,8 @@ class RobotSetup:
     its group's compile flavour (see ``nonholo.fleet.step``); ``start`` (x, y, θ, ξ);
     ``branch`` an l–φ bearing's initial 2π branch; ``fields`` a root's law fields (goal
     first for a posture law) or a follower's (k1, k2, d, …); ``plan`` RK4 sub-steps per output
-    step; ``rows`` (N+1, 10) the reference and ``targets`` (N+1, 4) this follower's targets
-    (offsets included) at the output instants."""
+    step; ``rows`` (N+1, 10) the reference and ``targets`` (N+1, 6) this follower's targets
+    (``nonholo.sim.targets.TABLE_COLUMNS``, offsets included) at the output instants."""
 
     name: str
     index: int
@@ -74,12 +75,12 @@ def robot_setups(scenario: Scenario, planned: list | None = None) -> dict[str, R
                 kind = int(group.kinds[j])
                 if isinstance(robot, Robot):
                     law, gains = group.laws[kind - kn.ROOT_A]
-                    targets = np.zeros((item.rows.shape[0], 4))
+                    targets = np.zeros((item.rows.shape[0], len(TABLE_COLUMNS)))
                 else:
                     law, gains = None, None
                     targets = item.targets[:, :, j].copy()
-                    targets[:, 0] = targets[:, 0] + group.offsets[0, j, b]
-                    targets[:, 1] = targets[:, 1] + group.offsets[1, j, b]
+                    targets[:, [0, 4]] = targets[:, [0, 4]] + group.offsets[0, j, b]   # (and the values just after)
+                    targets[:, [1, 5]] = targets[:, [1, 5]] + group.offsets[1, j, b]
                 setups[robot.name] = RobotSetup(
                     name=robot.name, index=index[robot.name],
                     kind=ROOT if isinstance(robot, Robot) else robot.law, parents=tuple(robot.parents),

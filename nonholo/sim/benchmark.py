@@ -51,6 +51,7 @@ from nonholo.sim import kernel as kn
 from nonholo.sim.files import load_scenario
 from nonholo.sim.scenario import Robot, Scenario
 from nonholo.sim.simulator import kernel_for, simulate
+from nonholo.sim.targets import TABLE_COLUMNS
 
 DT = 0.01
 BATCH_ROBOTS = 10_000
@@ -286,7 +287,7 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
     fields = np.zeros((kn.MAX_FIELDS, 1, robots))
     fields[:len(gains)] = np.array(gains)[:, None, None]
     graph = (np.full((2, 1, robots), np.inf), rows, 2 * np.arange(n_steps + 1), np.ones(n_steps, np.int64),
-             np.zeros((1, 4, 1)), np.zeros((2, 1, robots)), np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64),
+             np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, robots)), np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64),
              np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, robots)), batch.sin_floor,
              np.zeros(robots), 0.0, DT, 0)
 

@@ -243,11 +243,11 @@ class _Reader:
         posture = "goal" in data
         family = POSTURE_CONTROLLERS if posture else CONTROLLERS
         chosen = data.get("controller", "polar" if posture else "dynamic-feedback")
-        if chosen in POSTURE_CONTROLLERS and not posture:   # the law exists: say what it lacks
+        if isinstance(chosen, str) and chosen in POSTURE_CONTROLLERS and not posture:   # say what it lacks
             self.fail(f"{where}.goal", f"missing: the posture law {chosen} stabilises to a goal [x, y, theta] "
                                        "(a tracking root follows [reference] with one of "
                                        f"{', '.join(CONTROLLERS)})")
-        if chosen in CONTROLLERS and posture:
+        if isinstance(chosen, str) and chosen in CONTROLLERS and posture:
             self.fail(f"{where}.controller", f"{chosen} is a tracking law; a robot with a goal needs a posture law "
                                              f"({', '.join(POSTURE_CONTROLLERS)})")
         controller_name = self.string(chosen, f"{where}.controller", tuple(family))

@@ -43,6 +43,7 @@ from nonholo.sim.lawcall import law_at_address, law_entry, stack_copy
 from nonholo.sim.result import Metrics
 from nonholo.sim.scenario import Scenario
 from nonholo.sim.simulator import kernel_for
+from nonholo.sim.targets import TABLE_COLUMNS
 
 ENGINES = ("compiled", "scipy")
 _OPTIONS = dict(cache=True, error_model="numpy")
@@ -154,7 +155,7 @@ class _OneRobot:
 
     def graph(self) -> tuple:
         """(targets, offsets, kinds, order, parents, branch, sin_floor, d_max) of a lone root."""
-        return (np.zeros((1, 4, 1)), np.zeros((2, 1, 1)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+        return (np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, 1)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                 np.full((2, 1), -1, dtype=np.int64), np.zeros((1, 1)), 1e-6, np.zeros(1))
 
 
