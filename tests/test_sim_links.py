@@ -148,7 +148,7 @@ radius = 4.0
 period = 25.132741228718345
 [[robots]]
 name = "leader"
-controller = "kanayama"
+controller = "dynamic-feedback"
 start = [4.0, 0.0, 1.5707963267948966]
 [[robots]]
 name = "f"
