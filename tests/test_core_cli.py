@@ -82,7 +82,8 @@ BAD = [
      "robots[0].controller: expected a string, got list ['polar']"),
     (GOOD.replace('controller = "dynamic-feedback"', 'controller = "polar"').replace("gains = { kp = 1.0, kd = 0.7 }", ""),
      "robots[0].goal: missing: the posture law polar stabilises to a goal"),
-    (GOOD.replace('controller = "dynamic-feedback"', 'controller = "kanayama"\ngoal = [0, 0, 0]'),
+    (GOOD.replace('controller = "dynamic-feedback"', 'controller = "kanayama"\ngoal = [0, 0, 0]')
+     .replace("gains = { kp = 1.0, kd = 0.7 }", ""),
      "robots[0].controller: kanayama is a tracking law; a robot with a goal needs a posture law"),
     (GOOD.replace("kp = 1.0", "kq = 1.0"),
      "robots[0].gains.kq: unknown gain for dynamic-feedback (gains: kp1, kp2, kd1, kd2, xi_min, kp, kd, xi0)"),

@@ -287,8 +287,8 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
     fields = np.zeros((kn.MAX_FIELDS, 1, robots))
     fields[:len(gains)] = np.array(gains)[:, None, None]
     graph = (np.full((2, 1, robots), np.inf), rows, 2 * np.arange(n_steps + 1), np.ones(n_steps, np.int64),
-             np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, robots)), np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64),
-             np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, robots)), batch.sin_floor,
+             np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, robots)), np.full(1, kn.ROOT_A, np.int64),
+             np.zeros(1, np.int64), np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, robots)), batch.sin_floor,
              np.zeros(robots), 0.0, DT, 0)
 
     def kernel_alone():   # the batch's own time loop (``Kernel.roots``), without the simulator around it

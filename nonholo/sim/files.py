@@ -241,16 +241,9 @@ class _Reader:
         data = self.table(data, where, ROBOT_FIELDS)
         name = self.string(data.get("name", f"robot{index}"), f"{where}.name")
         posture = "goal" in data
-        family = POSTURE_CONTROLLERS if posture else CONTROLLERS
-        chosen = data.get("controller", "polar" if posture else "dynamic-feedback")
-        if isinstance(chosen, str) and chosen in POSTURE_CONTROLLERS and not posture:   # say what it lacks
-            self.fail(f"{where}.goal", f"missing: the posture law {chosen} stabilises to a goal [x, y, theta] "
-                                       "(a tracking root follows [reference] with one of "
-                                       f"{', '.join(CONTROLLERS)})")
-        if isinstance(chosen, str) and chosen in CONTROLLERS and posture:
-            self.fail(f"{where}.controller", f"{chosen} is a tracking law; a robot with a goal needs a posture law "
-                                             f"({', '.join(POSTURE_CONTROLLERS)})")
-        controller_name = self.string(chosen, f"{where}.controller", tuple(family))
+        family = {**CONTROLLERS, **POSTURE_CONTROLLERS}   # (a law without its goal, or the reverse: ``Robot`` says)
+        controller_name = self.string(data.get("controller", "polar" if posture else "dynamic-feedback"),
+                                      f"{where}.controller", tuple(family))
         spec = family[controller_name]
         gains = dict(self.table(data.get("gains", {}), f"{where}.gains"))
         variant = gains.pop("variant", None) if isinstance(gains.get("variant"), str) else None
@@ -265,8 +258,11 @@ class _Reader:
         except NonholoInputError as exc:
             self.fail(f"{where}.gains", str(exc))
         goal = self.pose(data["goal"], f"{where}.goal") if posture else None
-        return Robot(name, config, self.pose(data.get("start", [0.0, 0.0, 0.0]), f"{where}.start"),
-                     goal=goal, **self.limits(data, where))
+        try:
+            return Robot(name, config, self.pose(data.get("start", [0.0, 0.0, 0.0]), f"{where}.start"),
+                         goal=goal, **self.limits(data, where))
+        except FormationError as exc:
+            self.fail(f"{where}.{exc.field}", exc.problem)
 
     def follower(self, data, index: int) -> Follower:
         where = f"robots[{index}]"

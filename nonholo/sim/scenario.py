@@ -19,8 +19,9 @@ import numbers
 from collections import Counter
 from dataclasses import dataclass, field
 
-from nonholo.control.registry import ControllerConfig, controller, follower_gains
+from nonholo.control.registry import CONTROLLERS, POSTURE_CONTROLLERS, ControllerConfig, controller, follower_gains
 from nonholo.errors import FormationError, NonholoInputError
+from nonholo.models import formation_geometry as geometry
 from nonholo.models.formation_geometry import place_follower, pose_in_frame
 from nonholo.numerics import is_real
 from nonholo.references.base import Reference
@@ -87,10 +88,12 @@ class Robot:
             object.__setattr__(self, "goal", _pose(self.goal, self.name, "goal"))
             if not posture:
                 raise FormationError(self.name, "controller", f"{self.controller.name} is a tracking law; a robot "
-                                                              "with a goal needs a posture law (time-varying, polar, "
-                                                              "dynamic-feedback-posture)")
+                                                              "with a goal needs a posture law "
+                                                              f"({', '.join(POSTURE_CONTROLLERS)})")
         elif posture:
-            raise FormationError(self.name, "goal", f"the posture law {self.controller.name} needs a goal [x, y, theta]")
+            raise FormationError(self.name, "goal", f"missing: the posture law {self.controller.name} stabilises to a "
+                                                    "goal [x, y, theta] (a tracking root follows the reference with "
+                                                    f"one of {', '.join(CONTROLLERS)})")
         _limits(self)
 
     @property
@@ -235,11 +238,9 @@ class Scenario:
         where the bearing and the link laws are undefined (spec follower-posture.md §2.4)."""
         poses = dict(zip(self.names, self.initial_poses()))
         for robot in self.followers:
-            x, y, theta = poses[robot.name]
-            cx, cy = x + robot.d * math.cos(theta), y + robot.d * math.sin(theta)
             for parent in robot.leaders:
-                px, py, _ = poses[parent]
-                if math.hypot(cx - px, cy - py) <= 1e-9 * max(1.0, robot.d):
+                l, _, _ = geometry.separation_bearing(poses[parent], poses[robot.name], robot.d)
+                if l <= 1e-9 * max(1.0, robot.d):
                     raise FormationError(robot.name, "start", f"its castor point (d = {robot.d:g} m ahead of its "
                                                               f"axle) starts on {parent}'s axle centre: l = 0, where "
                                                               "the bearing and the formation laws are undefined; "

@@ -93,14 +93,14 @@ def target_table(follower, times: np.ndarray) -> np.ndarray:
         rate = np.zeros(times.size)
         for at, start, end, ramp in segments:
             tolerance = EVENT_TOLERANCE * max(1.0, abs(at))
-            after, from_on = times > at + tolerance, times > at - tolerance
+            after = times > at + tolerance
             if ramp == 0.0:
                 value = np.where(after, end, value)
-                value_after = np.where(from_on, end, value_after)
-            else:   # (continuous: the same either way)
+                value_after = np.where(times > at - tolerance, end, value_after)   # a step counted at its time
+            else:   # continuous: the same either way
                 tau = (times - at) / ramp
-                value = np.where(after, start + (end - start) * smoothstep(tau), value)
-                value_after = np.where(from_on, start + (end - start) * smoothstep(np.maximum(tau, 0.0)), value_after)
+                ramped = start + (end - start) * smoothstep(tau)
+                value, value_after = np.where(after, ramped, value), np.where(after, ramped, value_after)
                 rate = rate + (end - start) * smoothstep_rate(tau) / ramp
         table[:, output] = value
         table[:, 2 + output] = rate

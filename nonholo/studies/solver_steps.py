@@ -155,7 +155,8 @@ class _OneRobot:
 
     def graph(self) -> tuple:
         """(targets, offsets, kinds, order, parents, branch, sin_floor, d_max) of a lone root."""
-        return (np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, 1)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+        return (np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, 1)), np.zeros(1, dtype=np.int64),
+                np.zeros(1, dtype=np.int64),
                 np.full((2, 1), -1, dtype=np.int64), np.zeros((1, 1)), 1e-6, np.zeros(1))
 
 
