@@ -15,7 +15,14 @@ rate, the followers' gains — with the first ``STARTUP_TIME_CONSTANTS``/λ seco
 law refined ``STARTUP_REFINEMENT``-fold (its start-up transient), and so that h·ω ≤
 ``MEASURED_STEP_FACTOR`` for the rates measured while running where they cannot be known in
 advance — a formation's and a posture law's turn rates (|ω|, and |ξ̇/ξ| of speed
-compensators) — from a pilot run re-planned until a run's own rates are within its plan.
+compensators). Those are met while running: the horizon is integrated in ``PLAN_WINDOWS``
+windows of output steps (``plan_windows``), and a window whose own rates ask for more
+sub-steps than it ran is run again from its start (state, bearings, statistics and held
+commands put back) with more — at most ``PLAN_GROWTH`` times as many per step at each attempt,
+since an under-resolved run's rates overshoot — until its rates are within its plan or after
+``PLAN_ATTEMPTS`` runs (the last stands: a singular passage asks for more than
+``MAX_SUBSTEPS``). Only the windows that need it are run again: the 7-follower chain's
+start-up (3 400 rad/s in its first second) no longer re-runs the whole horizon.
 """
 from __future__ import annotations
 
@@ -43,7 +50,11 @@ MEASURED_STEP_FACTOR = 0.05
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
 MAX_SUBSTEPS = 1000
-PLAN_ITERATIONS = 6
+# Runs of a window at most (the last stands), and the most its sub-steps grow from one run to
+# the next: an under-resolved run's rates overshoot (see plan_windows).
+PLAN_ATTEMPTS = 8
+PLAN_GROWTH = 4
+PLAN_WINDOWS = 50
 # RK4 is stable for a linear mode of rate λ while h·λ < 2.785 (real axis).
 RK4_STABILITY_LIMIT = 2.78
 # The reference is surveyed at this many points to size the sub-steps.
@@ -105,16 +116,22 @@ def prior_plan(scenario: Scenario, rate: float) -> np.ndarray:
     return plan
 
 
-def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float) -> np.ndarray:
-    """Sub-steps so that h·rate ≤ MEASURED_STEP_FACTOR for the rates met in each output step,
-    each step also covering its neighbours' (a transient may start just after a sample)."""
-    rate = np.where(np.isfinite(step_rate), step_rate, np.inf)
-    widened = rate[:-1].copy()
-    widened[1:] = np.maximum(widened[1:], rate[:-2])
-    widened = np.maximum(widened, rate[1:])
+def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int = 0, k1: int | None = None) -> np.ndarray:
+    """Sub-steps of output steps [k0, k1) (default: all) so that h·rate ≤ MEASURED_STEP_FACTOR
+    for the rates met in each output step, each step also covering its neighbours' (a
+    transient may start just after a sample)."""
+    k1 = prior.size if k1 is None else k1
+    low = max(k0 - 1, 0)
+    rate = step_rate[low:k1 + 1]
+    rate = np.where(np.isfinite(rate), rate, np.inf)
+    widened = np.maximum(rate[k0 - low:k1 - low], rate[k0 - low + 1:k1 - low + 1])
+    if k0 > 0:
+        widened = np.maximum(widened, rate[:k1 - k0])
+    else:
+        widened[1:] = np.maximum(widened[1:], rate[:k1 - k0 - 1])
     needed = np.ceil(widened * dt / MEASURED_STEP_FACTOR)
     needed = np.clip(np.where(np.isfinite(needed), needed, MAX_SUBSTEPS), 1, MAX_SUBSTEPS).astype(np.int64)
-    return np.maximum(needed, prior)
+    return np.maximum(needed, prior[k0:k1])
 
 
 class Group:
@@ -529,12 +546,13 @@ def goal_origin(group: Group) -> tuple[list[int], np.ndarray] | None:
 
 
 def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
-    """Integrate a group; groups with followers re-plan from the measured rates. Under
-    continuous-time control a group of posture roots (and their followers) is integrated
-    with its first goal as origin (``goal_origin``); its record is in world coordinates.
-    (Sampled-data runs stay in world coordinates, as the robot programs of a fleet do.)"""
+    """Integrate a group; groups with followers or posture roots plan their sub-steps from the
+    rates they meet, window by window (``plan_windows``). Under continuous-time control a
+    group of posture roots (and their followers) is integrated with its first goal as origin
+    (``goal_origin``); its record is in world coordinates. (Sampled-data runs stay in world
+    coordinates, as the robot programs of a fleet do.)"""
     n_steps, dt = scenario.n_steps, scenario.dt
-    plan = group.prior
+    plan = group.prior.copy()
     shift = goal_origin(group) if scenario.hold_every == 0 else None
     fields, start = group.fields, group.state
     if shift is not None:
@@ -543,55 +561,86 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
         for j in roots:
             fields[:2, j] -= origin
         start[:2] -= origin[:, None, :]
-    iterations = PLAN_ITERATIONS if group.measured and scenario.substeps is None else 1
+    attempts = PLAN_ATTEMPTS if group.measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
     integrate = kernel.integrator(scenario.hold_every != 0, n_batch)
-    for iteration in range(iterations):
-        key = plan.tobytes()
-        if key not in cache_:
-            times, row_start = stage_times(dt, plan)
-            cache_[key] = (_reference_rows(scenario, times), row_start, times)
-            trim_reference_cache(cache_, key)
-        rows, row_start, times = cache_[key]
-        targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), n_robots))
-        state, branch = start.copy(), group.initial_branches()
-        stats, pair_stats = kn.new_stats(n_robots, n_batch)
-        records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
-        held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
-        step_rate = np.zeros(n_steps + 1)
-        args = (state, fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
-                group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max, group.xi_speed, dt,
-                scenario.hold_every)
-        outputs = (stats, pair_stats, records, held, step_rate)
-        work = float(plan.sum()) * n_robots * n_batch
-        show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
-        if linked(group):   # the link model: the kernel control period by control period (nonholo.sim.linkstep)
-            integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
-        else:
-            _integrate_chunks(integrate, args, n_steps, scenario.name, n_robots * n_batch, show, outputs)
-        if iteration == iterations - 1:   # the last run stands (its plan is the one returned)
-            break
-        needed = measured_plan(step_rate, group.prior, dt)
-        if np.all(needed <= plan):
-            break
-        plan = needed if iteration < iterations - 2 else np.maximum(plan, needed)
+    state, branch = start.copy(), group.initial_branches()
+    stats, pair_stats = kn.new_stats(n_robots, n_batch)
+    records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
+    held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
+    step_rate = np.zeros(n_steps + 1)
+    outputs = (stats, pair_stats, records, held, step_rate)
+    work = float(plan.sum()) * n_robots * n_batch
+    show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
+    whole = linked(group)   # the link model runs the whole horizon at once (nonholo.sim.linkstep)
+    bar = _progress_bar(show and not whole, n_steps, scenario.name, n_robots * n_batch)
+    args = None
+    try:
+        windows = plan_windows(n_steps) if (attempts > 1 or bar is not None) and not whole else [(0, n_steps)]
+        for k0, k1 in windows:
+            saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 else []
+            for attempt in range(attempts):
+                if args is None:   # (the plan's tables: made again only when the plan changed)
+                    rows, row_start, times = _stage_tables(scenario, dt, plan, cache_)
+                    targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), n_robots))
+                    args = (state, fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
+                            group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max,
+                            group.xi_speed, dt, scenario.hold_every)
+                if whole:
+                    integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
+                else:
+                    integrate(*args, k0, k1, n_steps, *outputs, False)
+                if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
+                    break
+                window = slice(k0, k1)
+                if step_rate[max(k0 - 1, 0):k1 + 1].max() * dt / MEASURED_STEP_FACTOR <= plan[window].min():
+                    break   # (every step has the sub-steps its rates ask for: the common case, quickly)
+                needed = measured_plan(step_rate, group.prior, dt, k0, k1)
+                short = needed > plan[window]
+                if not short.any():
+                    break
+                for array, copy in zip((state, branch, stats, pair_stats, held), saved):
+                    array[...] = copy
+                step_rate[k0:k1 + 1] = 0.0
+                plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
+                args = None
+            if bar is not None:
+                bar.update(k1 - k0)
+    finally:
+        if bar is not None:
+            bar.close()
     if shift is not None and record:   # back to world coordinates (rounded there), the starts as given
         records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
         records[[kn.REC_X, kn.REC_Y], 0] = group.state[:2]
     return stats, pair_stats, records, plan
 
 
-def _integrate_chunks(integrate, args, n_steps, name, count, progress, outputs):
-    if not progress:
-        integrate(*args, 0, n_steps, n_steps, *outputs, False)
-        return
+def plan_windows(n_steps: int) -> list[tuple[int, int]]:
+    """The output steps [k0, k1) of the windows a run is integrated in: ``PLAN_WINDOWS`` of
+    them (fewer for short runs). A window whose own rates ask for more sub-steps than it ran
+    is run again from its start (see ``_run_rk4``); a progress bar moves window by window.
+    The windows depend only on ``n_steps``: a run gives the same numbers shown or not."""
+    edges = np.unique(np.linspace(0, n_steps, min(PLAN_WINDOWS, n_steps) + 1).astype(np.int64))
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _stage_tables(scenario: Scenario, dt: float, plan: np.ndarray, cache_: dict) -> tuple:
+    """(reference rows at every RK4 stage time, first row of each output step, the stage
+    times) of ``plan``, kept in ``cache_`` for groups that share it."""
+    key = plan.tobytes()
+    if key not in cache_:
+        times, row_start = stage_times(dt, plan)
+        cache_[key] = (_reference_rows(scenario, times), row_start, times)
+        trim_reference_cache(cache_, key)
+    return cache_[key]
+
+
+def _progress_bar(show: bool, n_steps: int, name: str, count: int):
+    if not show:
+        return None
     from tqdm import tqdm
 
-    chunks = np.linspace(0, n_steps, 51).astype(np.int64)
-    with tqdm(total=n_steps, unit="step", desc=f"{name}: {count} robots", file=sys.stderr) as bar:
-        for k_start, k_stop in zip(chunks[:-1], chunks[1:]):
-            integrate(*args, int(k_start), int(k_stop), n_steps, *outputs, False)
-            bar.update(int(k_stop - k_start))
+    return tqdm(total=n_steps, unit="step", desc=f"{name}: {count} robots", file=sys.stderr)
 
 
 # A robot whose error or speed passed this (m, m/s) diverged, as one whose state became
