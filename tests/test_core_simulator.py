@@ -192,24 +192,43 @@ def _chain(duration: float) -> Scenario:
     return dataclasses.replace(load_scenario(examples.path("formation-chain")), duration=duration)
 
 
-def test_a_window_run_again_leaves_no_trace(monkeypatch):
+def _switch_at(at: float, **simulation) -> Scenario:
+    # the leader starts on its reference and the follower in formation: the first windows need
+    # no more sub-steps than planned in advance, the step change at ``at`` does
+    base = load_scenario(examples.path("formation-circle-switch"))
+    leader, follower = base.robots
+    row = base.reference.table(np.zeros(1))[0]
+    leader = dataclasses.replace(leader, start=(float(row[1]), float(row[2]), float(row[7])))
+    follower = dataclasses.replace(follower, start=None, changes=(dataclasses.replace(follower.changes[0], at=at),))
+    return dataclasses.replace(base, robots=(leader, follower), duration=20.0, **simulation)
+
+
+@pytest.mark.parametrize("case", ["chain", "switch", "switch-sampled"])
+def test_a_window_run_again_leaves_no_trace(monkeypatch, case):
     # A window whose rates ask for more sub-steps is run again from its start: the state,
-    # bearings, statistics and held commands go back to the window's start. So the planned run
-    # equals one run straight through on the plan it ended with (no window runs again then).
+    # bearings, statistics and held commands go back to the window's start, and the rows of the
+    # windows before keep their times. So the planned run equals one run straight through on
+    # the plan it ended with (no window runs again then), bit for bit.
     from nonholo.sim import simulator as sm
 
     plans = []
     run_rk4 = sm._run_rk4
     monkeypatch.setattr(sm, "_run_rk4", lambda *args: plans.append(run_rk4(*args)[-1]) or run_rk4(*args))
-    chain = _chain(3.0)
-    planned = simulate(chain)
+    scenario = {"chain": lambda: _chain(3.0), "switch": lambda: _switch_at(10.0, dt=0.1),
+                "switch-sampled": lambda: _switch_at(10.0, dt=0.05, control_period=0.1)}[case]()
+    planned = simulate(scenario)
     plan = plans[0]
-    assert plan.max() > 100 and plan.min() == 1   # re-planned: the start-up needs hundreds of sub-steps
+    if case == "chain":
+        assert plan.max() > 100 and plan.min() == 1   # re-planned: the start-up needs hundreds of sub-steps
+    else:   # re-planned at the change only
+        changed = np.flatnonzero(plan != plan[0])
+        assert changed.size and changed[0] >= int(10.0 / scenario.dt) - 1
     monkeypatch.setattr(sm, "prior_plan", lambda scenario, rate: plan.copy())
-    straight = simulate(chain)
+    straight = simulate(scenario)
     assert np.array_equal(plans[-1], plan)
     assert np.array_equal(planned.record, straight.record, equal_nan=True)
     assert np.array_equal(planned.stats, straight.stats, equal_nan=True)
+    assert np.array_equal(planned.reference_rows, straight.reference_rows)
 
 
 def test_a_planned_run_is_as_accurate_as_its_rule():
