@@ -256,3 +256,24 @@ def test_the_plan_of_a_window_is_the_plan_of_the_whole_run_there():
         for k0 in range(n):
             for k1 in range(k0 + 1, n + 1):
                 assert np.array_equal(measured_plan(rate, prior, 0.01, k0, k1), whole[k0:k1])
+
+
+def test_a_plan_s_reference_table_is_built_once(monkeypatch):
+    # Shown with a progress bar (50 windows) or not, a run with a fixed plan evaluates its
+    # reference once per stage row; a measured plan that is never changed builds its table once.
+    from nonholo.sim import simulator as sm
+
+    built = []
+    reference_rows = sm._reference_rows
+    monkeypatch.setattr(sm, "_reference_rows", lambda scenario, times: built.append(times.size) or
+                        reference_rows(scenario, times))
+    circle = dataclasses.replace(load_scenario(examples.path("test4-circle")), substeps=2, duration=20.0, steps=None)
+    for progress in (False, True):
+        built.clear()
+        simulate(circle, record=False, progress=progress)
+        assert built == [2 * 2 * circle.n_steps + 1]
+    leader, follower = _switch_at(10.0, dt=0.1).robots   # measured (a follower); no change: no re-plan
+    still = dataclasses.replace(_switch_at(10.0, dt=0.1), robots=(leader, dataclasses.replace(follower, changes=())))
+    built.clear()
+    simulate(still)
+    assert len(built) == 1

@@ -587,14 +587,23 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     windows = plan_windows(n_steps) if (attempts > 1 or show) and not whole else [(0, n_steps)]
 
     def tables(k0: int, k1: int) -> tuple:
-        """The window's stage rows (its own only, from row 0), their times and targets."""
-        rows, row_start, times = _stage_tables(scenario, dt, plan, k0, k1, cache_ if k1 - k0 == n_steps else None)
+        """The window's stage rows (its own only, from row 0), their times and targets: views
+        of the whole plan's tables until the plan changes (groups that share a plan share
+        them), then built for the window alone."""
+        if not changed[0]:
+            if not full:
+                full.extend(_stage_tables(scenario, dt, plan, 0, n_steps, cache_))
+            rows, row_start, times = full
+            rows, times = rows[row_start[k0]:row_start[k1] + 1], times[row_start[k0]:row_start[k1] + 1]
+        else:
+            rows, row_start, times = _stage_tables(scenario, dt, plan, k0, k1, None)
         targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), n_robots))
         return rows, row_start - row_start[k0] if k0 else row_start, times, targets
 
     # The first tables before the outputs: in this order glibc's malloc keeps reusing the same
     # memory from one run to the next (the other way round, a Test 1 run faulted in 2 200
     # fresh pages, 9.8 instead of 5.4 ms, without nonholo.cli.tune_memory's settings).
+    changed, full = [False], []   # whether a window was planned again; the first plan's tables
     rows, row_start, times, targets = tables(*windows[0])
     state, branch = start.copy(), group.initial_branches()
     stats, pair_stats = kn.new_stats(n_robots, n_batch)
@@ -632,17 +641,21 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                     array[...] = copy
                 step_rate[k0:k1 + 1] = 0.0
                 plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
-                replanned = True
+                replanned = changed[0] = True
             kept.append((rows, times))
             if bar is not None:
                 bar.update(k1 - k0)
     finally:
         if bar is not None:
             bar.close()
-    if len(kept) > 1:   # the whole plan's tables, for the result and the robots of a fleet (planned_groups)
-        key = plan.tobytes()
-        cache_[key] = (np.concatenate([r[:-1] for r, _ in kept] + [kept[-1][0][-1:]]), plan_rows(plan),
-                       np.concatenate([t[:-1] for _, t in kept] + [kept[-1][1][-1:]]))
+    key = plan.tobytes()
+    if key not in cache_:   # the whole plan's tables, for the result and the robots of a fleet (planned_groups)
+        if len(kept) == 1:
+            cache_[key] = (kept[0][0], plan_rows(plan), kept[0][1])
+        else:
+            cache_[key] = (np.concatenate([r[:-1] for r, _ in kept] + [kept[-1][0][-1:]]), plan_rows(plan),
+                           np.concatenate([t[:-1] for _, t in kept] + [kept[-1][1][-1:]]))
+        kept.clear()
         trim_reference_cache(cache_, key)
     if shift is not None and record:   # back to world coordinates (rounded there), the starts as given
         records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
