@@ -586,25 +586,11 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     whole = linked(group)   # the link model runs the whole horizon at once (nonholo.sim.linkstep)
     windows = plan_windows(n_steps) if (attempts > 1 or show) and not whole else [(0, n_steps)]
 
-    def tables(k0: int, k1: int) -> tuple:
-        """The window's stage rows (its own only, from row 0), their times and targets: views
-        of the whole plan's tables until the plan changes (groups that share a plan share
-        them), then built for the window alone."""
-        if not changed[0]:
-            if not full:
-                full.extend(_stage_tables(scenario, dt, plan, 0, n_steps, cache_))
-            rows, row_start, times = full
-            rows, times = rows[row_start[k0]:row_start[k1] + 1], times[row_start[k0]:row_start[k1] + 1]
-        else:
-            rows, row_start, times = _stage_tables(scenario, dt, plan, k0, k1, None)
-        targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), n_robots))
-        return rows, row_start - row_start[k0] if k0 else row_start, times, targets
-
     # The first tables before the outputs: in this order glibc's malloc keeps reusing the same
     # memory from one run to the next (the other way round, a Test 1 run faulted in 2 200
     # fresh pages, 9.8 instead of 5.4 ms, without nonholo.cli.tune_memory's settings).
-    changed, full = [False], []   # whether a window was planned again; the first plan's tables
-    rows, row_start, times, targets = tables(*windows[0])
+    full = _plan_tables(scenario, dt, plan, cache_)   # the first plan's, until a window is planned again
+    rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, *windows[0])
     state, branch = start.copy(), group.initial_branches()
     stats, pair_stats = kn.new_stats(n_robots, n_batch)
     records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
@@ -616,10 +602,10 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     try:
         for w, (k0, k1) in enumerate(windows):
             saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 else []
-            replanned = w > 0   # (a window's first run builds its tables; the first window's are built)
+            replanned = w > 0   # (the first window's tables are made above)
             for attempt in range(attempts):
                 if replanned:
-                    rows, row_start, times, targets = tables(k0, k1)
+                    rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, k0, k1)
                 args = (state, fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
                         group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max,
                         group.xi_speed, dt, scenario.hold_every)
@@ -641,7 +627,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                     array[...] = copy
                 step_rate[k0:k1 + 1] = 0.0
                 plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
-                replanned = changed[0] = True
+                replanned, full = True, None
             kept.append((rows, times))
             if bar is not None:
                 bar.update(k1 - k0)
@@ -672,19 +658,31 @@ def plan_windows(n_steps: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def _stage_tables(scenario: Scenario, dt: float, plan: np.ndarray, k0: int, k1: int, cache_: dict | None) -> tuple:
-    """(reference rows at the RK4 stage times of output steps [k0, k1) and at the sample k1,
-    the first row of each output step, the stage times); those of the whole horizon are kept
-    in ``cache_`` (if given) for groups that share the plan."""
-    if cache_ is None:
-        times, row_start = stage_times(dt, plan, k0, k1)
-        return _reference_rows(scenario, times), row_start, times
+def _plan_tables(scenario: Scenario, dt: float, plan: np.ndarray, cache_: dict) -> tuple:
+    """(reference rows at every RK4 stage time of ``plan``, the first row of each output step,
+    the stage times), kept in ``cache_`` for groups that share the plan."""
     key = plan.tobytes()
     if key not in cache_:
         times, row_start = stage_times(dt, plan)
         cache_[key] = (_reference_rows(scenario, times), row_start, times)
         trim_reference_cache(cache_, key)
     return cache_[key]
+
+
+def _window_tables(scenario: Scenario, group: Group, dt: float, plan: np.ndarray, full: tuple | None, k0: int,
+                   k1: int) -> tuple:
+    """The stage rows of output steps [k0, k1) and of the sample k1, numbered from the
+    window's first (rows, row_start, times), and the followers' targets at those times: views
+    of ``full`` (``_plan_tables`` of ``plan``), or built for the window alone if None (a plan
+    changed by a window planned again)."""
+    if full is not None:
+        rows, row_start, times = full
+        rows, times = rows[row_start[k0]:row_start[k1] + 1], times[row_start[k0]:row_start[k1] + 1]
+    else:
+        times, row_start = stage_times(dt, plan, k0, k1)
+        rows = _reference_rows(scenario, times)
+    targets = group.targets(times) if group.followers else np.zeros((1, len(TABLE_COLUMNS), group.state.shape[1]))
+    return rows, row_start - row_start[k0] if k0 else row_start, times, targets
 
 
 def _progress_bar(show: bool, n_steps: int, name: str, count: int):
