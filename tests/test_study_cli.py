@@ -28,6 +28,12 @@ def test_study_all_runs_every_registered_study(tmp_path, capsys, monkeypatch):
         def finish(self):
             return self.out / "index.html"
 
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            pass
+
     monkeypatch.setattr(report, "ReportWriter", Writer)
     from nonholo.studies import base
 

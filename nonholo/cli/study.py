@@ -25,7 +25,21 @@ def register(subparsers) -> None:
                         help="no progress (bar on a terminal, one-line logs on stderr otherwise) and no tables")
     parser.add_argument("--sampling", choices=("uniform", "solver-steps", "both"), default="both",
                         help="statistics over the uniform grid, the solver's accepted steps, or both (default)")
+    parser.add_argument("--processes", type=_processes, default=2, metavar="N",
+                        help="work beside the study in up to N processes forked from this one: the report's "
+                             "figures drawn while the next study runs, the leader's gain sweeps while its tests run "
+                             "(default: %(default)s; 0: everything in this process, in order)")
     parser.set_defaults(handler=handle)
+
+
+def _processes(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 16:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 16, got {text!r}")
+    return value
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -35,7 +49,8 @@ def handle(args: argparse.Namespace) -> int:
 
     outcomes = []   # (name, wall time, ok) of each study: its result goes once its section is written
     try:
-        options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet, sampling=args.sampling)
+        options = StudyOptions(Path(args.out), quick=args.quick, progress=not args.quiet, sampling=args.sampling,
+                               processes=args.processes)
         chosen_studies(args.names)  # unknown names fail before any work
         import nonholo.studies.plots  # noqa: F401  (matplotlib: imported before the collector is tuned)
         with collector_for_long_work():
@@ -49,7 +64,7 @@ def handle(args: argparse.Namespace) -> int:
     if args.quiet:
         print(f"report: {page}")
     else:
-        print(f"report: {page} (figures and data files: {report_s:.1f} s)")
+        print(f"report: {page} (figures and data files: {report_s:.1f} s beyond the studies)")
         print(f"wall time: {command_wall_time():.1f} s in all; studies "
               + ", ".join(f"{name} {elapsed:.1f} s" for name, elapsed, _ in outcomes) + f", report {report_s:.1f} s")
     return EXIT_OK if all(ok for _, _, ok in outcomes) else EXIT_FAILURE
@@ -61,17 +76,17 @@ def _run_studies(args, options, outcomes: list) -> tuple[Path, float]:
     from nonholo.studies.report import ReportWriter, each_result
 
     report_s = 0.0
-    writer = ReportWriter(options.out_dir, options)
-    for result in each_result(args.names, options):
-        if not args.quiet:   # a study's summary as soon as it finishes
-            print(result.text())
-            print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
-                  flush=True)
-        report_s += writer.add(result)
-        outcomes.append((result.name, result.elapsed_s, result.ok))
-        del result   # the report section is written: the next study runs without this one's arrays
-    started = time.perf_counter()
-    page = writer.finish()
+    with ReportWriter(options.out_dir, options) as writer:
+        for result in each_result(args.names, options):
+            if not args.quiet:   # a study's summary as soon as it finishes
+                print(result.text())
+                print(f"\nstudy {result.name}: {result.elapsed_s:.1f} s (simulations and statistics, wall time)\n",
+                      flush=True)
+            report_s += writer.add(result)
+            outcomes.append((result.name, result.elapsed_s, result.ok))
+            del result   # its section is written, its figures drawing: the next study runs without its arrays
+        started = time.perf_counter()
+        page = writer.finish()
     return page, report_s + time.perf_counter() - started
 
 

@@ -7,9 +7,9 @@ discovered by ``discover()``, the way ``nonholo.cli`` discovers commands, so add
 
 ``Study.run(options) -> StudyResult``. A ``StudyResult`` carries its data and knows how to
 present itself: ``text()`` for the terminal (at most 100 columns: summaries; the wide
-tables go to the report and CSV), ``html_section(folder)`` for the report
-(it writes its figures into ``folder`` and returns an HTML fragment that refers to them by
-relative path), ``write_data(folder)`` for CSV/JSON, ``to_dict()`` and ``ok``.
+tables go to the report and CSV), ``html_section(folder, draw)`` for the report
+(it hands each figure's drawing to ``draw``, which writes it into ``folder``, and returns an
+HTML fragment that refers to the figures by relative path), ``write_data(folder)`` for CSV/JSON, ``to_dict()`` and ``ok``.
 """
 from __future__ import annotations
 
@@ -19,6 +19,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+from nonholo.studies.forking import draw_now
 
 SAMPLINGS = ("uniform", "solver-steps", "both")
 
@@ -33,8 +35,14 @@ class StudyOptions:
     quick: bool = False
     progress: bool = True
     sampling: str = "both"
+    processes: int = 2   # forked helpers at once: figures, independent parts (0: all here; ``studies.forking``)
 
     def __post_init__(self):
+        if not isinstance(self.processes, int) or not 0 <= self.processes <= 16:
+            from nonholo.errors import NonholoInputError
+
+            raise NonholoInputError(f"processes must be a whole number from 0 to 16, not "
+                                    f"{self.processes!r}")
         if self.sampling not in SAMPLINGS:
             from nonholo.errors import NonholoInputError
 
@@ -73,9 +81,11 @@ class StudyResult(ABC):
         """Plain-text summary for the terminal."""
 
     @abstractmethod
-    def html_section(self, folder: Path) -> str:
+    def html_section(self, folder: Path, draw: Callable = draw_now) -> str:
         """An HTML fragment (figures written into ``folder``, referred to relatively
-        from the report's ``index.html`` one level up)."""
+        from the report's ``index.html`` one level up); each figure is drawn by handing the
+        call to ``draw`` (``draw(plot, data, folder / "name.png")``), which may draw it later,
+        in another process (``nonholo.studies.forking``): the fragment names the file only."""
 
     @abstractmethod
     def write_data(self, folder: Path) -> list[Path]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,7 @@ from nonholo.formation import (Follower, Formation, FormationResult, link_state,
                                simulate_formation)
 from nonholo.sim.targets import target_segments
 from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.forking import draw_now
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
                                        TabulatedStudyResult, Table, degrees, show)
 
@@ -406,8 +407,8 @@ class FormationStudyResult(TabulatedStudyResult):
             text += f" QUICK MODE: dt = {QUICK_DT} s (not the canonical numbers)."
         return text
 
-    def write_figures(self, folder: Path) -> list[tuple[str, str]]:
-        return write_formation_figures(self, folder)
+    def write_figures(self, folder: Path, draw: Callable = draw_now) -> list[tuple[str, str]]:
+        return write_formation_figures(self, folder, draw)
 
 
 def compare_with_spec(result: FormationStudyResult) -> list[Comparison]:
@@ -698,7 +699,8 @@ def plot_separation_outputs(study: FormationStudyResult, path: Path) -> None:
     finish_figure(fig, axes, "l–l follower F (Eq 5.10): distances, singularity margin and bearings", path)
 
 
-def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[tuple[str, str]]:
+def write_formation_figures(study: FormationStudyResult, folder: Path, draw: Callable = draw_now
+                            ) -> list[tuple[str, str]]:
     figures = []
     from nonholo.studies.plots import plot_formation_case
 
@@ -706,18 +708,18 @@ def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[t
         name = f"paths-{case}.png"
         run = study.runs[case]
         source = f" (thesis {THESIS_FIGURES[case]})" if THESIS_FIGURES[case].startswith("Fig") else ""
-        plot_formation_case(run, f"{CASE_TITLES[case]}{source}: {len(run.formation.robots)} robots, "
-                                 f"{run.t[-1]:.5g} s, dt = {run.formation.dt:g} s", folder / name)
+        draw(plot_formation_case, run, f"{CASE_TITLES[case]}{source}: {len(run.formation.robots)} robots, "
+                                       f"{run.t[-1]:.5g} s, dt = {run.formation.dt:g} s", folder / name)
         figures.append((name, f"{CASE_TITLES[case]}{source}: paths with snapshots (triangles at "
                               "equal time steps; grey: leader axle → follower castor point), the follower output "
                               "errors, and each robot's applied speed v and turn rate ω (one panel each; start-up "
                               "peaks outside a row's scale are clipped and named above the panel)."))
-    plot_bearing_outputs(study, folder / "lphi-outputs.png")
+    draw(plot_bearing_outputs, study, folder / "lphi-outputs.png")
     figures.insert(2, ("lphi-outputs.png", "l–φ separation and bearing over time (Fig 5.41–5.42) and the Eq 5.9 "
                                            "change close up. The three runs coincide until t = 100 s (the closed "
                                            "loop does not depend on the leader's path): the widest line is drawn "
                                            "first, so each stays visible."))
-    plot_separation_outputs(study, folder / "ll-outputs.png")
+    draw(plot_separation_outputs, study, folder / "ll-outputs.png")
     figures.append(("ll-outputs.png", "l–l follower: controlled distances, singularity margin, and the bearings that "
                                       "Eq 5.10 lists but the law does not control."))
     switch = study.runs["switch-T4"]
@@ -726,7 +728,7 @@ def write_formation_figures(study: FormationStudyResult, folder: Path) -> list[t
     # the animation's title is the formation's name: use it as the legend
     titled = dataclasses.replace(switch.formation, name="Eq 5.9 change (blue: leader, orange: follower)")
     window = dataclasses.replace(window, scenarios=(titled,))
-    window.write_gif(folder / "switch.gif", frames=study.gif_frames, fps=8, trail=8.0)
+    draw(window.write_gif, folder / "switch.gif", frames=study.gif_frames, fps=8, trail=8.0)
     figures.append(("switch.gif", f"Animation of the Eq 5.9 change on Test 4, t = {at + GIF_WINDOW[0]:g}–"
                                   f"{at + GIF_WINDOW[1]:g} s: the follower swings behind the leader (grey: leader axle "
                                   f"→ follower castor point)."))

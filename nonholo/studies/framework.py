@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from nonholo.studies.base import StudyResult
+from nonholo.studies.forking import draw_now
 from nonholo.studies.report import escape, html_figure, html_list, html_table
 
 TERMINAL_WIDTH = 100
@@ -312,8 +313,9 @@ class TabulatedStudyResult(StudyResult):
     def setup_text(self) -> str:
         raise NotImplementedError
 
-    def write_figures(self, folder: Path) -> list[tuple[str, str]]:
-        """Write the figures into ``folder``; returns (file name, caption) pairs."""
+    def write_figures(self, folder: Path, draw: Callable = draw_now) -> list[tuple[str, str]]:
+        """Hand the drawing of each figure into ``folder`` to ``draw``; returns (file name,
+        caption) pairs."""
         raise NotImplementedError
 
     @property
@@ -333,13 +335,13 @@ class TabulatedStudyResult(StudyResult):
                   findings_text([dataclasses.replace(f, reason="") for f in self.findings], width)]
         return "\n".join(lines)
 
-    def html_section(self, folder: Path) -> str:
+    def html_section(self, folder: Path, draw: Callable = draw_now) -> str:
         parts = [f"<p>{escape(self.setup_text())}</p>", '<h2 id="' + escape(self.name) + '-differences">Differences '
                  "from the thesis</h2>", html_list(f.html() for f in self.findings),
                  f'<h2 id="{escape(self.name)}-tables">Tables</h2>']
         parts += [table.html() for table in self.tables()]
         parts.append(f'<h2 id="{escape(self.name)}-figures">Figures</h2>')
-        for name, caption in self.write_figures(folder):
+        for name, caption in self.write_figures(folder, draw):
             parts.append(html_figure(f"{folder.name}/{name}", caption))
         return "\n".join(parts)
 

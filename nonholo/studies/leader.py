@@ -29,6 +29,7 @@ from nonholo import examples
 from nonholo import load_scenario, simulate
 from nonholo.studies import thesis_values as thesis
 from nonholo.studies.base import Study, StudyOptions, StudyResult
+from nonholo.studies.forking import ForkedCall, draw_now
 from nonholo.studies.framework import (TERMINAL_WIDTH, Finding, agreement_score, findings_text, fitted_table, fmt,
                                        log_ratio, wrap)
 from nonholo.studies.report import escape, html_figure, html_list, html_table
@@ -142,13 +143,16 @@ def run_leader(options: StudyOptions) -> "LeaderStudyResult":
         if solver:
             tasks.append((f"solver steps {test}",
                           lambda test=test: solver_step_statistics(canonical_scenario(test, False))))
-    tasks.append(("gain sweeps", lambda: simulate_gain_effects(options.quick)))
-    outputs = {}
-    with options.progress_for("study leader", len(tasks)) as progress:
-        for label, task in tasks:
-            progress.start(label)
-            outputs[label] = task()
-            progress.done()
+    # the sweeps (small results, most of a first run's compiling) run in a process of their own
+    # from the start, beside the tests; with processes=0 here, last, as before
+    with ForkedCall(lambda: simulate_gain_effects(options.quick), options.processes, "gain-sweeps") as sweeps:
+        tasks.append(("gain sweeps", sweeps.result))
+        outputs = {}
+        with options.progress_for("study leader", len(tasks)) as progress:
+            for label, task in tasks:
+                progress.start(label)
+                outputs[label] = task()
+                progress.done()
     runs = {test: outputs[f"simulate {test}"] for test in EXAMPLES}
     solver_runs = {test: outputs.get(f"solver steps {test}") for test in EXAMPLES}
     effects = outputs["gain sweeps"]
@@ -285,7 +289,7 @@ class LeaderStudyResult(StudyResult):
         return [[LABELS[e.controller], e.gain, f"{e.sweep.axes[0].values[0]:g}…{e.sweep.axes[0].values[-1]:g}",
                  e.trend.word, e.claim_text, "yes" if e.agrees else "no"] for e in self.effects]
 
-    def html_section(self, folder: Path) -> str:
+    def html_section(self, folder: Path, draw: Callable = draw_now) -> str:
         from nonholo.studies.plots import plot_comparison, plot_sweep_panels, plot_test, plot_test_inputs
 
         parts = [f"<p>{escape(_setup_text(self))}</p>", '<h2 id="leader-differences">Differences from the thesis</h2>',
@@ -298,18 +302,18 @@ class LeaderStudyResult(StudyResult):
         for test in EXAMPLES:
             parts.append(html_table(self.table_header(), self.table_rows(test), self.table_caption(test),
                                     self.table_groups()))
-        plot_comparison(list(EXAMPLES), CONTROLLERS, LABELS, series, folder / "comparison.png")
+        draw(plot_comparison, list(EXAMPLES), CONTROLLERS, LABELS, series, folder / "comparison.png")
         parts.append(html_figure(f"{folder.name}/comparison.png", "Mean error per test and controller, log scale "
                                  "(offset point has no thesis value)."))
         for test in EXAMPLES:
             parts.append(f'<h2 id="leader-{test.lower()}">{escape(TEST_TITLES[test])}</h2>')
             name = f"{test.lower()}.png"
-            plot_test(self.runs[test], TEST_TITLES[test], LABELS, folder / name, PATH_WINDOW[test])
+            draw(plot_test, self.runs[test], TEST_TITLES[test], LABELS, folder / name, PATH_WINDOW[test])
             parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]} (thesis Figures 5.5–5.24): "
                                      "every controller from the origin with θ(0) = 0. Where two controllers' lines "
                                      "coincide, the thinner one is drawn inside the wider one."))
             name = f"{test.lower()}-inputs.png"
-            plot_test_inputs(self.runs[test], TEST_TITLES[test], LABELS, folder / name, INPUT_WINDOW[test])
+            draw(plot_test_inputs, self.runs[test], TEST_TITLES[test], LABELS, folder / name, INPUT_WINDOW[test])
             parts.append(html_figure(f"{folder.name}/{name}", f"{TEST_TITLES[test]}: the applied driving speed v and "
                                      "turn rate ω of each controller beside the reference's v_d and ω_d (dashed), and "
                                      "its heading error e3 = θ_d − θ wrapped to (−180°, 180°]. Each column shares its "
@@ -321,7 +325,8 @@ class LeaderStudyResult(StudyResult):
         for controller in thesis.THESIS_CONTROLLERS:
             effects = [e for e in self.effects if e.controller == controller]
             name = f"sweep-{controller}.png"
-            plot_sweep_panels(effects, f"Test 1, {LABELS[controller]}: mean error against each gain", folder / name)
+            draw(plot_sweep_panels, effects, f"Test 1, {LABELS[controller]}: mean error against each gain",
+                 folder / name)
             parts.append(html_figure(f"{folder.name}/{name}", f"{LABELS[controller]}: dotted line = Table 5.1 value."))
         return "\n".join(parts)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ from nonholo.control.posture import POSTURE_CONTROLLERS, goal_frame_pose, polar_
 from nonholo.formation import Formation, FormationResult, simulate_formation
 from nonholo.models.formation_geometry import wrap
 from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.forking import draw_now
 from nonholo.studies.formation import QUICK_DT
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
                                        TabulatedStudyResult, Table, show)
@@ -258,10 +260,10 @@ class PostureStudyResult(TabulatedStudyResult):
             text += f" QUICK MODE: dt = {QUICK_DT} s (not the canonical numbers)."
         return text
 
-    def write_figures(self, folder: Path) -> list[tuple[str, str]]:
-        plot_posture_runs(self, folder / "posture-runs.png")
-        plot_posture_inputs(self, folder / "posture-inputs.png")
-        plot_polar_variants(self, folder / "polar-variants.png")
+    def write_figures(self, folder: Path, draw: Callable = draw_now) -> list[tuple[str, str]]:
+        draw(plot_posture_runs, self, folder / "posture-runs.png")
+        draw(plot_posture_inputs, self, folder / "posture-inputs.png")
+        draw(plot_polar_variants, self, folder / "polar-variants.png")
         return [("posture-runs.png", "The three laws to both goals (Figures 5.46–5.51): paths, distance to the goal "
                                      "and heading over time."),
                 ("posture-inputs.png", "What each law applies: driving speed v and turn rate ω to both goals; "

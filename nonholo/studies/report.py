@@ -115,65 +115,94 @@ def _contents(section_id: str, title: str, fragment: str) -> str:
 
 
 class ReportWriter:
-    """The report, written one study at a time: ``add`` writes a study's figures and data
-    files under ``out_dir/<study>/`` and keeps its section of the page, ``finish`` writes
-    ``out_dir/index.html`` (contents, one section per study, appendix, run times) and
-    ``studies.json`` and returns the page's path. The writer keeps no study result: a caller
-    that adds each result as soon as its study finishes can let its arrays go before the next
-    study runs (``nonholo study`` does; the leader study's recorded runs are ~300 MB)."""
+    """The report, written one study at a time: ``add`` writes a study's data files under
+    ``out_dir/<study>/``, keeps its section of the page and starts drawing its figures (in
+    forked processes while the next study runs, ``nonholo.studies.forking``); ``finish``
+    waits for the figures, writes ``out_dir/index.html`` (contents, one section per study,
+    appendix, run times) and ``studies.json`` and returns the page's path; ``close`` (or the
+    end of a ``with`` block) stops any drawing still running. The writer keeps no study
+    result: a caller that adds each result as soon as its study finishes can let its arrays
+    go before the next study runs (``nonholo study`` does; the leader study's recorded runs are
+    ~300 MB; a drawing process keeps its own view of them until its figures are drawn)."""
 
     def __init__(self, out_dir: Path, options: StudyOptions | None = None):
+        from nonholo.studies.forking import Drawing
+
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.options = options
         self.sections, self.contents, self.summary, self.citations = [], [], {}, set()
         self.quick = False
+        self.drawing = Drawing(options.processes if options is not None else 0)
+
+    def _progress(self, label: str, total: int, unit: str):
+        if self.options is None or total == 0:
+            return Progress(label, total, "off")
+        return self.options.progress_for(label, total, unit)
 
     def add(self, result: StudyResult) -> float:
-        """Write ``result``'s figures, data files and section; returns the seconds it took."""
+        """Write ``result``'s data files and section and start drawing its figures; returns the
+        seconds it took this process (the figures may still be drawing: ``finish``)."""
         import matplotlib
 
         from nonholo.studies.citations import find_citations
         from nonholo.studies.plots import FIGURE_STYLE
 
         out_dir = self.out_dir
-        progress = (self.options.progress_for(f"report {result.name}", 1, "section") if self.options is not None
-                    else Progress("report", 1, "off"))
-        with progress:
-            progress.start(f"{result.name}: figures and data")
-            started = time.perf_counter()
+        started = time.perf_counter()
+        with self._progress(f"report {result.name}", 1, "section") as progress:
+            progress.start(f"{result.name}: data and page")
             folder = out_dir / result.name
             folder.mkdir(parents=True, exist_ok=True)
             with matplotlib.rc_context(FIGURE_STYLE):
                 files = result.write_data(folder)
-                body = result.html_section(folder)
+                body = section_html(result, folder, self.drawing)
             spec_file = getattr(result, "spec_file", "leader.md")
             self.citations |= find_citations(re.sub(r"<[^>]+>", "", html.unescape(body)), spec_file)
             body = decorate(body, spec_file)
-            drawn = time.perf_counter() - started
-            links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>'
-                               for f in files)
-            self.sections.append(f'<section id="{escape(result.name)}"><h1>{escape(result.title)}</h1>'
-                                 f'<p class="note">Data: {links}. Simulations and statistics took {result.elapsed_s:.1f} s '
-                                 f"(wall time), figures and data files {drawn:.1f} s.</p>{body}</section>")
-            self.contents.append(_contents(result.name, result.title, body))
-            self.summary[result.name] = {"title": result.title, "elapsed_s": result.elapsed_s, "report_s": drawn,
-                                         "files": [f.relative_to(out_dir).as_posix() for f in files]}
-            self.quick = self.quick or getattr(result, "quick", False)
             progress.done()
-        return drawn
+        # the figures start once the progress line is closed: no thread of this process
+        # writes to the terminal while it forks (a child must not inherit a held stream lock)
+        figures = len(self.drawing.queued)
+        here = self.drawing.processes == 0 and figures > 0   # drawn now, in this process: show them
+        with self._progress(f"figures {result.name}", figures if here else 0, "figures") as progress, \
+                matplotlib.rc_context(FIGURE_STYLE):
+            self.drawing.start(result.name, progress if here else None)
+        links = " · ".join(f'<a href="{escape(f.relative_to(out_dir).as_posix())}">{escape(f.name)}</a>'
+                           for f in files)
+        self.sections.append((result.name, result.title, result.elapsed_s, links, body))
+        self.contents.append(_contents(result.name, result.title, body))
+        self.summary[result.name] = {"title": result.title, "elapsed_s": result.elapsed_s, "report_s": None,
+                                     "figures": figures, "files": [f.relative_to(out_dir).as_posix() for f in files]}
+        self.quick = self.quick or getattr(result, "quick", False)
+        return time.perf_counter() - started
 
     def finish(self) -> Path:
-        """Write the page and ``studies.json``; returns the page's path."""
+        """Wait for the figures, write the page and ``studies.json``; returns the page's path."""
         from nonholo.studies.citations import appendix_html
 
+        pending = self.drawing.pending()
+        with self._progress("report figures", pending, "figures") as progress:
+            drawn = self.drawing.finish(progress if pending else None)
+        sections = []
+        for name, title, elapsed_s, links, body in self.sections:
+            seconds = drawn.get(name, {}).get("seconds", 0.0)
+            self.summary[name]["report_s"] = round(seconds, 3)
+            figures = self.summary[name]["figures"]
+            drawing = f", its {figures} figures {seconds:.1f} s" if figures else ""
+            sections.append(f'<section id="{escape(name)}"><h1>{escape(title)}</h1><p class="note">Data: {links}. '
+                            f"Simulations and statistics took {elapsed_s:.1f} s (wall time){drawing}.</p>{body}"
+                            "</section>")
         appendix = appendix_html(self.citations)
-        sections = [*self.sections, f'<section id="appendix"><h1>Appendix: the specification sections and errata '
-                                    f"cited</h1>{appendix}</section>"]
+        sections.append(f'<section id="appendix"><h1>Appendix: the specification sections and errata '
+                        f"cited</h1>{appendix}</section>")
         contents = [*self.contents, _contents("appendix", "Appendix: specification sections and errata cited", "")]
         rows = "".join(f'<tr><td class="text"><a href="#{escape(name)}">{escape(name)}</a></td>'
                        f'<td class="num">{entry["elapsed_s"]:.1f} s</td>'
                        f'<td class="num">{entry["report_s"]:.1f} s</td></tr>' for name, entry in self.summary.items())
+        processes = self.drawing.processes
+        drawn_where = (f" (the figures drawn in {processes} other process{'es' if processes > 1 else ''} while the "
+                       "next study runs)" if processes else "")
         header = ('<header><h1 style="margin-top:0.6em">nonholo study report</h1>'
                   f'<p class="note">Generated {escape(time.strftime("%Y-%m-%d %H:%M"))} by <code>nonholo study</code>'
                   + (" in QUICK MODE (coarser grids: not the canonical numbers)" if self.quick else "")
@@ -181,8 +210,8 @@ class ReportWriter:
                   '<span class="holds">holds</span>, <span class="partly">partly</span>, <span class="fails">fails</span>, '
                   "note), then the tables and the figures. Citations such as “spec §5.3” or “erratum 19” link to the "
                   "appendix, which explains them.</p>"
-                  f'<div class="scroll"><table><caption>Wall times</caption><thead><tr><th>study</th>'
-                  f"<th>simulations and statistics</th><th>figures and data files</th></tr></thead><tbody>{rows}"
+                  f'<div class="scroll"><table><caption>Wall times{drawn_where}</caption><thead><tr><th>study</th>'
+                  f"<th>simulations and statistics</th><th>figures</th></tr></thead><tbody>{rows}"
                   "</tbody></table></div></header>")
         nav = f'<nav id="toc"><h2>Contents</h2><ol>{"".join(contents)}</ol></nav>'
         page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
@@ -194,15 +223,35 @@ class ReportWriter:
         (self.out_dir / "studies.json").write_text(json.dumps(self.summary, indent=2))
         return path
 
+    def close(self) -> None:
+        """Stop and reap any figure drawing still running."""
+        self.drawing.close()
+
+    def __enter__(self) -> "ReportWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
 
 def write_report(results: Sequence[StudyResult], out_dir: Path, options: StudyOptions | None = None) -> Path:
     """Write every study's figures and data under ``out_dir/<study>/`` and the page
     ``out_dir/index.html`` (``ReportWriter``); returns the page's path. Progress per study
     section if ``options.progress``."""
-    writer = ReportWriter(out_dir, options)
-    for result in results:
-        writer.add(result)
-    return writer.finish()
+    with ReportWriter(out_dir, options) as writer:
+        for result in results:
+            writer.add(result)
+        return writer.finish()
+
+
+def section_html(result: StudyResult, folder: Path, draw) -> str:
+    """``result``'s section of the page, its figures handed to ``draw`` (a study whose
+    ``html_section`` takes no ``draw`` draws them itself, at once)."""
+    import inspect
+
+    if "draw" in inspect.signature(result.html_section).parameters:
+        return result.html_section(folder, draw=draw)
+    return result.html_section(folder)
 
 
 def chosen_studies(names: Sequence[str] | None) -> list:

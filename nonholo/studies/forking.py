@@ -1,0 +1,288 @@
+"""Work beside a study, in processes forked from it: the report's figures, and a study's
+own independent part (the leader study's gain sweeps).
+
+Matplotlib builds and renders a figure in Python, one core at a time (26 figures: most of a
+warm ``nonholo study``), and numba compiles one function at a time (most of a first run);
+neither vectorizes, and these machines have two cores. A child forked from the study's own
+process sees the study's data as it is in memory: nothing is copied or pickled on the way in.
+
+* **Figures.** A report section names its figures as calls, ``draw(plot_test, runs, title,
+  path)``, and goes on writing its text: the page refers to a figure by its file name, never
+  to what drawing it returned. ``Drawing`` draws a section's calls in up to ``processes``
+  children, which take the calls one by one from a shared counter, while the parent runs the
+  next study. ``finish`` waits for them, with progress, and raises one line naming the
+  figure if any drawing failed. ``draw_now`` is the same interface drawing at once, in this
+  process.
+* **A call.** ``ForkedCall(function)`` runs ``function()`` in a child at once;
+  ``result()`` waits for its return value (pickled back: keep it small) or raises the
+  child's exception in the parent.
+
+Both fall back to this process (in order, at the same points) where ``fork`` is not the safe
+default (anything but Linux) or with ``processes=0``; ``close`` stops and reaps every child
+(an interrupted study leaves none behind). A child is forked only while no progress line
+is being drawn: no thread of this process holds the terminal's lock when it forks.
+
+>>> calls = []
+>>> draw_now(calls.append, "figure.png")
+>>> calls
+['figure.png']
+>>> ForkedCall(lambda: 6 * 7, processes=0).result()
+42
+"""
+from __future__ import annotations
+
+import multiprocessing
+import multiprocessing.connection
+import sys
+import time
+from collections.abc import Callable
+
+#: child processes at once, by default: the machines this is made for have two cores
+PROCESSES = 2
+#: how long ``finish`` and a section waiting for a free process block between looks (seconds)
+POLL_S = 0.2
+
+
+def draw_now(function: Callable, *args, **kwargs) -> None:
+    """Draw a figure at once (``function(*args, **kwargs)``)."""
+    function(*args, **kwargs)
+
+
+def forking() -> bool:
+    """True where work may go to forked children (Linux)."""
+    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+
+
+def _call_name(function: Callable) -> str:
+    return getattr(function, "__qualname__", None) or getattr(function, "__name__", None) or repr(function)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _draw_calls(calls: list, counter, connection) -> None:
+    """A child's work: take the next call from the section's shared counter until none is
+    left, report each figure drawn; a failure is one line to the parent and exit code 1."""
+    import os
+
+    try:
+        while True:
+            with counter.get_lock():
+                index = counter.value
+                counter.value += 1
+            if index >= len(calls):
+                break
+            function, args, kwargs = calls[index]
+            try:
+                function(*args, **kwargs)
+            except BaseException as exc:  # noqa: BLE001 (one line to the parent, whatever it was)
+                connection.send(("error", f"figure {_call_name(function)} failed: {_one_line(exc)}"))
+                connection.close()
+                os._exit(1)
+            connection.send(("drawn", index))
+        connection.send(("done", time.perf_counter()))   # the clock is the system's: the parent reads it alike
+    finally:
+        connection.close()
+
+
+class Drawing:
+    """Figures of report sections drawn in forked children (see the module docstring).
+
+    Calling it queues a figure (the ``draw`` a section receives); ``start(section)`` starts
+    drawing what was queued since the last start; ``finish()`` waits for every figure;
+    ``close()`` (also at the end of a ``with`` block) stops whatever still runs.
+    """
+
+    def __init__(self, processes: int = PROCESSES):
+        if not isinstance(processes, int) or processes < 0:
+            raise ValueError(f"processes must be a whole number >= 0, not {processes!r}")
+        self.processes = processes if forking() else 0
+        self.queued: list = []
+        self.running: list = []          # [process, connection, section]
+        self.sections: dict = {}         # section -> {"figures", "drawn", "started", "seconds", "children"}
+        self.failure: str | None = None
+
+    # -- queue and start
+    def __call__(self, function: Callable, *args, **kwargs) -> None:
+        self.queued.append((function, args, kwargs))
+
+    def start(self, section: str, progress=None) -> None:
+        """Draw the figures queued since the last start as ``section``'s: in this process if
+        there are no child processes (``progress`` sees each figure drawn), otherwise in up to
+        ``processes`` children once as many are free (the parent waits for a free one)."""
+        calls, self.queued = self.queued, []
+        entry = {"figures": len(calls), "drawn": 0, "started": time.perf_counter(), "seconds": 0.0, "children": 0}
+        self.sections[section] = entry
+        if not calls:
+            return
+        if self.processes == 0:
+            for function, args, kwargs in calls:
+                function(*args, **kwargs)
+                entry["drawn"] += 1
+                if progress is not None:
+                    progress.done(f"{section} figure {entry['drawn']}")
+            entry["seconds"] = time.perf_counter() - entry["started"]
+            return
+        context = multiprocessing.get_context("fork")
+        # kept until the section's children are reaped: its shared memory, freed while they
+        # still count on it, would be the next section's counter
+        counter = entry["counter"] = context.Value("l", 0)
+        for n in range(min(self.processes, len(calls))):
+            self._wait(until_free=self.processes)
+            if self.failure:
+                break
+            if n == 0:   # the section's drawing starts with its first child, not with its wait for one
+                entry["started"] = time.perf_counter()
+            receiver, sender = context.Pipe(duplex=False)
+            process = context.Process(target=_draw_calls, args=(calls, counter, sender), daemon=True,
+                                      name=f"nonholo-figures-{section}")
+            process.start()
+            sender.close()
+            entry["children"] += 1
+            self.running.append([process, receiver, section])
+        self._raise_failure()
+
+    # -- wait
+    def finish(self, progress=None) -> dict:
+        """Wait for every figure; ``progress`` (a ``Progress`` over ``pending()`` figures)
+        sees each one drawn. Returns each section's figures, how many were drawn, and its
+        drawing's wall time (from its start to its last child's end); raises
+        ``RuntimeError`` with one line if a figure failed (every child reaped)."""
+        self._wait(until_free=1, progress=progress)
+        self._raise_failure()
+        return {name: {"figures": e["figures"], "drawn": e["drawn"], "seconds": e["seconds"]}
+                for name, e in self.sections.items()}
+
+    def pending(self) -> int:
+        """Figures queued or started and not drawn yet."""
+        return len(self.queued) + sum(e["figures"] - e["drawn"] for e in self.sections.values())
+
+    def _wait(self, until_free: int, progress=None) -> None:
+        """Read the children's reports until fewer than ``until_free`` run (a failure stops all)."""
+        while self.running and len(self.running) >= until_free and not self.failure:
+            ready = multiprocessing.connection.wait([r[1] for r in self.running], timeout=POLL_S)
+            for child in [r for r in self.running if r[1] in ready]:
+                self._read(child, progress)
+
+    def _read(self, child: list, progress) -> None:
+        process, connection, section = child
+        entry = self.sections[section]
+        try:
+            kind, value = connection.recv()
+        except (EOFError, OSError):
+            kind, value = "gone", None
+        if kind == "drawn":
+            entry["drawn"] += 1
+            if progress is not None:
+                progress.done(f"{section} figure {value + 1}")
+            return
+        connection.close()
+        process.join()
+        self.running.remove(child)
+        entry["children"] -= 1
+        if entry["children"] == 0:
+            entry.pop("counter", None)
+        if kind == "done":
+            entry["seconds"] = max(entry["seconds"], value - entry["started"])
+        elif kind == "error":
+            self.failure = value
+        else:
+            self.failure = (f"figures of {section}: the drawing process ended without a word "
+                            f"(exit code {process.exitcode})")
+
+    def _raise_failure(self) -> None:
+        if self.failure:
+            message = self.failure
+            self.close()
+            raise RuntimeError(message)
+
+    # -- stop
+    def close(self) -> None:
+        """Stop and reap every child still drawing (nothing is left running)."""
+        for process, connection, _ in self.running:
+            if process.is_alive():
+                process.terminate()
+        for process, connection, _ in self.running:
+            process.join()
+            connection.close()
+        self.running = []
+
+    def __enter__(self) -> "Drawing":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _call(function: Callable, connection) -> None:
+    """A child's work for ``ForkedCall``: the return value, or the exception (itself if it
+    pickles, else a ``RuntimeError`` of one line)."""
+    import pickle
+
+    try:
+        try:
+            message = ("value", function())
+        except BaseException as exc:  # noqa: BLE001 (handed to the parent, whatever it was)
+            try:
+                pickle.loads(pickle.dumps(exc))
+                message = ("error", exc)
+            except Exception:  # noqa: BLE001 (an exception that does not travel: its line does)
+                message = ("error", RuntimeError(f"{_call_name(function)} failed: {_one_line(exc)}"))
+        connection.send(message)
+    finally:
+        connection.close()
+
+
+class ForkedCall:
+    """``function()`` run in a forked child from now on; ``result()`` its return value (see
+    the module docstring). With ``processes=0`` or without ``fork``, ``result()`` calls it
+    here instead, when asked."""
+
+    def __init__(self, function: Callable, processes: int = PROCESSES, name: str = "call"):
+        self.function, self.process, self.connection = function, None, None
+        self._outcome: tuple | None = None   # ("value", v) or ("error", exception) once known
+        if processes > 0 and forking():
+            context = multiprocessing.get_context("fork")
+            self.connection, sender = context.Pipe(duplex=False)
+            self.process = context.Process(target=_call, args=(function, sender), daemon=True,
+                                           name=f"nonholo-{name}")
+            self.process.start()
+            sender.close()
+
+    def result(self):
+        """The return value (waiting for the child); the child's exception is raised here,
+        at every call."""
+        if self._outcome is None:
+            if self.process is None:
+                try:
+                    self._outcome = ("value", self.function())
+                except Exception as exc:
+                    self._outcome = ("error", exc)
+            else:
+                try:
+                    self._outcome = self.connection.recv()
+                except (EOFError, OSError):
+                    self.process.join()
+                    self._outcome = ("error", RuntimeError(f"{_call_name(self.function)}: its process ended "
+                                                           f"without a word (exit code {self.process.exitcode})"))
+                self.close()
+        kind, value = self._outcome
+        if kind == "error":
+            raise value
+        return value
+
+    def close(self) -> None:
+        """Reap the child (stopped first if it has not answered yet)."""
+        if self.process is not None:
+            if self._outcome is None and self.process.is_alive():
+                self.process.terminate()
+            self.process.join()
+            self.connection.close()
+            self.process = None
+
+    def __enter__(self) -> "ForkedCall":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

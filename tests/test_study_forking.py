@@ -1,0 +1,250 @@
+"""Work in forked processes (``nonholo.studies.forking``): the report's figures, the same
+files as drawn at once; a call's value or its exception; failures as one line; nothing left
+running."""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from nonholo.studies.forking import Drawing, ForkedCall, draw_now, forking
+
+needs_fork = pytest.mark.skipif(not forking(), reason="figures are drawn in forked processes on Linux only")
+
+
+def _plot(values, path):
+    from nonholo.studies.plots import plt, save_figure
+
+    fig, ax = plt.subplots(figsize=(3, 2))
+    ax.plot(values, label=f"{len(values)} values")
+    ax.legend()
+    save_figure(fig, path)
+
+
+def _write_pid(path):
+    Path(path).write_text(str(os.getpid()))
+
+
+def _append_pid_slowly(path):
+    time.sleep(0.05)
+    with open(path, "a") as handle:
+        handle.write(f"{os.getpid()}\n")
+
+
+def _fail(path):
+    raise ValueError(f"no data for\n{Path(path).name}")
+
+
+def _vanish(path):
+    os._exit(3)
+
+
+def _sleep(path):
+    time.sleep(60)
+
+
+def _reaped(prefix="nonholo-figures"):
+    """No such child of this process is left (``active_children`` also reaps)."""
+    return [p for p in multiprocessing.active_children() if p.name.startswith(prefix)] == []
+
+
+@needs_fork
+def test_figures_drawn_in_children_are_the_files_drawn_at_once(tmp_path):
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir()
+    there.mkdir()
+    data = [list(range(n)) for n in (3, 50, 7, 400, 12)]
+    for i, values in enumerate(data):
+        draw_now(_plot, values, here / f"f{i}.png")
+    with Drawing(2) as drawing:
+        for i, values in enumerate(data):
+            drawing(_plot, values, there / f"f{i}.png")
+        drawing(_write_pid, there / "pid-a")
+        drawing(_write_pid, there / "pid-b")
+        assert drawing.pending() == 7
+        drawing.start("section")
+        result = drawing.finish()
+    assert result["section"]["figures"] == 7 and result["section"]["seconds"] > 0
+    assert drawing.pending() == 0
+    for i in range(len(data)):
+        assert (there / f"f{i}.png").read_bytes() == (here / f"f{i}.png").read_bytes()
+    pids = {int((there / name).read_text()) for name in ("pid-a", "pid-b")}
+    assert os.getpid() not in pids
+    assert _reaped()
+
+
+@needs_fork
+def test_sections_share_the_processes_and_each_is_timed(tmp_path):
+    with Drawing(2) as drawing:
+        for section in ("a", "b", "c"):
+            for i in range(3):
+                drawing(_append_pid_slowly, tmp_path / f"{section}{i}")
+            drawing.start(section)
+            assert len(drawing.running) <= 2
+        result = drawing.finish()
+    assert sorted(result) == ["a", "b", "c"]
+    assert all(entry["figures"] == entry["drawn"] == 3 and entry["seconds"] >= 0.05 for entry in result.values())
+    # every figure drawn, each once (a section's children share its counter, not another's)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{s}{i}" for s in "abc" for i in range(3)]
+    assert all(len(p.read_text().split()) == 1 for p in tmp_path.iterdir())
+    assert _reaped()
+
+
+def test_without_processes_figures_are_drawn_at_once_in_order(tmp_path):
+    order = []
+    drawing = Drawing(0)
+    for name in ("one", "two", "three"):
+        drawing(order.append, name)
+    assert order == []
+    drawing.start("section")
+    assert order == ["one", "two", "three"]
+    assert drawing.finish()["section"]["figures"] == 3
+
+
+@needs_fork
+def test_a_failing_figure_is_one_line_naming_it_and_no_child_is_left(tmp_path):
+    drawing = Drawing(2)
+    for i in range(4):
+        drawing(_sleep if i == 3 else _write_pid, tmp_path / f"x{i}")
+    drawing(_fail, tmp_path / "bad.png")
+    drawing.start("section")
+    with pytest.raises(RuntimeError) as caught:
+        drawing.finish()
+    message = str(caught.value)
+    assert message == "figure _fail failed: no data for bad.png"
+    assert _reaped()
+
+
+@needs_fork
+def test_a_child_that_vanishes_is_reported_with_its_exit_code(tmp_path):
+    drawing = Drawing(1)
+    drawing(_vanish, tmp_path / "gone.png")
+    drawing.start("section")
+    with pytest.raises(RuntimeError, match=r"figures of section: the drawing process ended without a word "
+                                           r"\(exit code 3\)"):
+        drawing.finish()
+    assert _reaped()
+
+
+@needs_fork
+def test_close_stops_drawing_at_once(tmp_path):
+    drawing = Drawing(2)
+    drawing(_sleep, tmp_path / "a")
+    drawing(_sleep, tmp_path / "b")
+    drawing.start("section")
+    assert len(drawing.running) == 2
+    started = time.perf_counter()
+    drawing.close()
+    assert time.perf_counter() - started < 10
+    assert drawing.running == [] and _reaped()
+
+
+def test_a_bad_process_count_is_refused():
+    from nonholo.errors import NonholoInputError
+    from nonholo.studies import StudyOptions
+
+    with pytest.raises(ValueError, match="processes must be a whole number"):
+        Drawing(-1)
+    with pytest.raises(NonholoInputError, match="processes must be a whole number from 0 to 16"):
+        StudyOptions(Path("x"), processes=17)
+    run = subprocess.run([sys.executable, "-m", "nonholo", "study", "--processes", "two", "--out", "x"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert "--processes: expected a whole number from 0 to 16, got 'two'" in run.stderr
+    assert "Traceback" not in run.stderr
+
+
+@needs_fork
+def test_the_report_waits_for_its_figures_and_keeps_sections_that_draw_themselves(tmp_path):
+    from nonholo.studies import StudyOptions
+    from nonholo.studies.report import ReportWriter
+
+    class Drawn:
+        name, title, elapsed_s, spec_file = "drawn", "Drawn", 0.5, "leader.md"
+
+        def write_data(self, folder):
+            return []
+
+        def html_section(self, folder, draw=draw_now):
+            for i in range(3):
+                draw(_plot, [1, 2, i], folder / f"p{i}.png")
+            return "<p>three figures</p>"
+
+    class Itself(Drawn):   # a study written before ``draw``: it draws its figure itself
+        name, title = "itself", "Itself"
+
+        def html_section(self, folder):
+            _plot([4, 5], folder / "own.png")
+            return "<p>its own figure</p>"
+
+    options = StudyOptions(tmp_path, progress=False, processes=2)
+    with ReportWriter(tmp_path, options) as writer:
+        writer.add(Drawn())
+        writer.add(Itself())
+        page = writer.finish().read_text(encoding="utf-8")
+    assert all((tmp_path / "drawn" / f"p{i}.png").stat().st_size > 1000 for i in range(3))
+    assert (tmp_path / "itself" / "own.png").stat().st_size > 1000
+    assert "(wall time), its 3 figures" in page and "(wall time).</p><p>its own figure" in page
+    assert _reaped()
+
+
+class Unpicklable(Exception):
+    def __init__(self, message, handle):
+        super().__init__(message)
+        self.handle = handle
+
+    def __reduce__(self):
+        raise TypeError("cannot pickle a handle")
+
+
+@needs_fork
+def test_a_forked_call_returns_its_value_from_another_process():
+    parent = os.getpid()
+    with ForkedCall(lambda: {"pid": os.getpid(), "values": list(range(5))}) as call:
+        value = call.result()
+        assert call.result() is value   # asked again: the same value, no second run
+    assert value["values"] == [0, 1, 2, 3, 4] and value["pid"] != parent
+    assert call.process is None and _reaped("nonholo-call")
+
+
+@needs_fork
+def test_a_forked_call_raises_the_child_s_exception_in_the_parent():
+    from nonholo.errors import NonholoInputError
+
+    def bad_input():
+        raise NonholoInputError("scenario.toml: [reference] kind: expected one of line, circle")
+
+    call = ForkedCall(bad_input)
+    for _ in range(2):   # at every call
+        with pytest.raises(NonholoInputError, match=r"^scenario.toml: \[reference\] kind: expected"):
+            call.result()
+
+    def unpicklable():
+        raise Unpicklable("a socket\nbroke", object())
+
+    with pytest.raises(RuntimeError, match=r"^test_a_forked_call_raises.*unpicklable failed: a socket broke$"):
+        ForkedCall(unpicklable).result()
+    with pytest.raises(RuntimeError, match=r"its process ended without a word \(exit code 5\)"):
+        ForkedCall(lambda: os._exit(5)).result()
+    assert _reaped("nonholo-call")
+
+
+@needs_fork
+def test_a_forked_call_closed_unanswered_is_stopped():
+    call = ForkedCall(lambda: time.sleep(60))
+    started = time.perf_counter()
+    call.close()
+    assert time.perf_counter() - started < 10 and _reaped("nonholo-call")
+
+
+def test_without_processes_a_call_runs_here_when_asked():
+    ran = []
+    call = ForkedCall(lambda: ran.append(os.getpid()) or "value", processes=0)
+    assert ran == [] and call.process is None
+    assert call.result() == "value" and call.result() == "value"
+    assert ran == [os.getpid()]
