@@ -102,3 +102,21 @@ def test_best_point_on_the_grid_edge_is_reported():
     assert low.to_dict()["best"] == {"point": {"kx": 1.0}, "value": 1.0, "on_edge": ["kx"]}
     corner = result([[5.0, 4.0], [3.0, 9.0], [6.0, 7.0]], GainAxis.linear("a", 0, 2, 3), GainAxis.linear("b", 0, 1, 2))
     assert corner.best() == {"a": 1.0, "b": 0.0} and corner.best_on_edge() == ["b"]
+
+
+def test_a_chunk_builds_only_its_own_robots_and_they_are_the_whole_grid_s():
+    from nonholo import examples
+    from nonholo.formation import Follower
+    from nonholo.studies.sweep import sweep_robots
+
+    scenario = nh.load_scenario(examples.path("test1-eight"))
+    axes = [GainAxis.linear("kx", 1.0, 9.0, 7), GainAxis.linear("ky", 0.01, 0.03, 5)]
+    base = next(r for r in scenario.robots if r.controller.name == "kanayama")
+    whole = sweep_robots(base, axes, "0:")
+    assert len(whole) == 35 and whole[12].name == "0:kanayama#12"
+    for span in (slice(0, 35), slice(3, 17), slice(34, 35), slice(20, 20)):
+        assert sweep_robots(base, axes, "0:", span) == whole[span]
+    chain = nh.load_scenario(examples.path("formation-chain"))
+    follower = next(r for r in chain.robots if isinstance(r, Follower))
+    axes = [GainAxis.linear("k1", 0.5, 2.0, 6)]
+    assert sweep_robots(follower, axes, span=slice(2, 5)) == sweep_robots(follower, axes)[2:5]

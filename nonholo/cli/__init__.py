@@ -133,6 +133,20 @@ def tune_memory() -> dict[str, bool]:
     return taken
 
 
+MAX_PROCESSES = 16
+
+
+def processes_count(text: str) -> int:
+    """``--processes N``: a whole number from 0 to ``MAX_PROCESSES`` (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_PROCESSES:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {MAX_PROCESSES}, got {text!r}")
+    return value
+
+
 @contextlib.contextmanager
 def collector_for_long_work():
     """Leave what is alive now (the imported modules, numba's and matplotlib's own objects)

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, collector_for_long_work
+from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, collector_for_long_work, processes_count
 
 
 def register(subparsers) -> None:
@@ -25,21 +25,12 @@ def register(subparsers) -> None:
                         help="no progress (bar on a terminal, one-line logs on stderr otherwise) and no tables")
     parser.add_argument("--sampling", choices=("uniform", "solver-steps", "both"), default="both",
                         help="statistics over the uniform grid, the solver's accepted steps, or both (default)")
-    parser.add_argument("--processes", type=_processes, default=2, metavar="N",
+    parser.add_argument("--processes", type=processes_count, default=2, metavar="N",
                         help="work beside the study in up to N processes forked from this one: the report's "
                              "figures drawn while the next study runs, the leader's gain sweeps while its tests run "
                              "(default: %(default)s; 0: everything in this process, in order)")
     parser.set_defaults(handler=handle)
 
-
-def _processes(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 0 <= value <= 16:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 16, got {text!r}")
-    return value
 
 
 def handle(args: argparse.Namespace) -> int:

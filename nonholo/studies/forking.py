@@ -61,9 +61,22 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
+def _travelling(exc: BaseException, function: Callable) -> BaseException:
+    """``exc`` itself if it pickles (the parent raises the same type), else a ``RuntimeError``
+    of one line."""
+    import pickle
+
+    try:
+        pickle.loads(pickle.dumps(exc))
+        return exc
+    except Exception:  # noqa: BLE001 (an exception that does not travel: its line does)
+        return RuntimeError(f"{_call_name(function)} failed: {_one_line(exc)}")
+
+
 def _draw_calls(calls: list, counter, connection) -> None:
-    """A child's work: take the next call from the section's shared counter until none is
-    left, report each figure drawn; a failure is one line to the parent and exit code 1."""
+    """A child's work: take the next figure's call from the shared counter until none is
+    left and report each one drawn, ``("drawn", index)``; a failure is one line to the
+    parent and exit code 1."""
     import os
 
     try:
@@ -83,6 +96,32 @@ def _draw_calls(calls: list, counter, connection) -> None:
             connection.send(("drawn", index))
         connection.send(("done", time.perf_counter()))   # the clock is the system's: the parent reads it alike
     finally:
+        connection.close()
+
+
+def _fork_children(calls: list, processes: int, name: str) -> tuple[list, object]:
+    """Up to ``processes`` children drawing ``calls``, taken from one new shared counter:
+    their [process, connection] pairs and the counter (keep it until they are reaped: its
+    shared memory, freed while they still count on it, could become another counter)."""
+    context = multiprocessing.get_context("fork")
+    counter = context.Value("l", 0)
+    children = []
+    for _ in range(min(processes, len(calls))):
+        receiver, sender = context.Pipe(duplex=False)
+        process = context.Process(target=_draw_calls, args=(calls, counter, sender), daemon=True, name=name)
+        process.start()
+        sender.close()
+        children.append([process, receiver])
+    return children, counter
+
+
+def _reap(children: list) -> None:
+    """Stop (if still running) and reap every child of ``children``."""
+    for process, _ in children:
+        if process.is_alive():
+            process.terminate()
+    for process, connection in children:
+        process.join()
         connection.close()
 
 
@@ -124,24 +163,13 @@ class Drawing:
                     progress.done(f"{section} figure {entry['drawn']}")
             entry["seconds"] = time.perf_counter() - entry["started"]
             return
-        context = multiprocessing.get_context("fork")
-        # kept until the section's children are reaped: its shared memory, freed while they
-        # still count on it, would be the next section's counter
-        counter = entry["counter"] = context.Value("l", 0)
-        for n in range(min(self.processes, len(calls))):
-            self._wait(until_free=self.processes)
-            if self.failure:
-                break
-            if n == 0:   # the section's drawing starts with its first child, not with its wait for one
-                entry["started"] = time.perf_counter()
-            receiver, sender = context.Pipe(duplex=False)
-            process = context.Process(target=_draw_calls, args=(calls, counter, sender), daemon=True,
-                                      name=f"nonholo-figures-{section}")
-            process.start()
-            sender.close()
-            entry["children"] += 1
-            self.running.append([process, receiver, section])
+        wanted = min(self.processes, len(calls))
+        self._wait(until_free=self.processes - wanted + 1)   # as many free processes as the section takes
         self._raise_failure()
+        entry["started"] = time.perf_counter()
+        children, entry["counter"] = _fork_children(calls, wanted, f"nonholo-figures-{section}")
+        entry["children"] = len(children)
+        self.running += [[process, connection, section] for process, connection in children]
 
     # -- wait
     def finish(self, progress=None) -> dict:
@@ -200,12 +228,7 @@ class Drawing:
     # -- stop
     def close(self) -> None:
         """Stop and reap every child still drawing (nothing is left running)."""
-        for process, connection, _ in self.running:
-            if process.is_alive():
-                process.terminate()
-        for process, connection, _ in self.running:
-            process.join()
-            connection.close()
+        _reap([child[:2] for child in self.running])
         self.running = []
 
     def __enter__(self) -> "Drawing":
@@ -218,17 +241,11 @@ class Drawing:
 def _call(function: Callable, connection) -> None:
     """A child's work for ``ForkedCall``: the return value, or the exception (itself if it
     pickles, else a ``RuntimeError`` of one line)."""
-    import pickle
-
     try:
         try:
             message = ("value", function())
         except BaseException as exc:  # noqa: BLE001 (handed to the parent, whatever it was)
-            try:
-                pickle.loads(pickle.dumps(exc))
-                message = ("error", exc)
-            except Exception:  # noqa: BLE001 (an exception that does not travel: its line does)
-                message = ("error", RuntimeError(f"{_call_name(function)} failed: {_one_line(exc)}"))
+            message = ("error", _travelling(exc, function))
         connection.send(message)
     finally:
         connection.close()

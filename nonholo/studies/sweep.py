@@ -248,19 +248,21 @@ def _with_values(robot: Follower, values: dict) -> Follower:
     return dataclasses.replace(robot, targets=tuple(targets), **values)
 
 
-def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "") -> list[Robot]:
-    """One copy of ``base`` per grid point (row-major over ``axes``), with that point's
-    gains and the same start, limits, variant and ξ(0)."""
+def sweep_robots(base: Robot, axes: Sequence[GainAxis], prefix: str = "", span: slice = slice(None)) -> list[Robot]:
+    """One copy of ``base`` per grid point (row-major over ``axes``; only the points of
+    ``span``, a chunk's), with that point's gains and the same start, limits, variant and
+    ξ(0)."""
     names = [a.name for a in axes]
     if len(set(names)) != len(names):
         raise NonholoInputError(f"a gain is swept twice: {', '.join(names)}")
     grids = np.meshgrid(*(a.values for a in axes), indexing="ij")
+    first = span.indices(grids[0].size)[0]
+    points = zip(*(g.ravel()[span] for g in grids))
     if isinstance(base, Follower):
-        return [_with_values(base, {n: float(v) for n, v in zip(names, point)})
-                for point in zip(*(g.ravel() for g in grids))]
+        return [_with_values(base, {n: float(v) for n, v in zip(names, point)}) for point in points]
     return [dataclasses.replace(base, name=f"{prefix}{base.name}#{index}",
                                 controller=with_gains(base.controller, {n: float(v) for n, v in zip(names, point)}))
-            for index, point in enumerate(zip(*(g.ravel() for g in grids)))]
+            for index, point in enumerate(points, first)]
 
 
 def with_gains(config, values: dict):
@@ -374,11 +376,15 @@ def sweep_chunk(payload: dict) -> dict:
     specs = _specs(payload["specs"])
     a, b = payload["range"]
     if payload["which"] is None:
-        robots = []
-        for number, spec in enumerate(specs):
-            base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
-            robots += sweep_robots(base, spec.axes, prefix=f"{number}:" if len(specs) > 1 else "")
-        batch = dataclasses.replace(scenario, robots=tuple(robots[a:b]), steps=None, name=f"{scenario.name}-sweep")
+        robots, start = [], 0
+        for number, spec in enumerate(specs):   # only the chunk's robots are built
+            points = int(np.prod([x.values.size for x in spec.axes]))
+            lo, hi = max(a - start, 0), min(b - start, points)
+            if lo < hi:
+                base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
+                robots += sweep_robots(base, spec.axes, f"{number}:" if len(specs) > 1 else "", slice(lo, hi))
+            start += points
+        batch = dataclasses.replace(scenario, robots=tuple(robots), steps=None, name=f"{scenario.name}-sweep")
         metrics = simulate(batch, record=False, progress=payload["progress"]).metrics
         return {s: np.atleast_1d(getattr(metrics, f"error_{s}")) for s in _STATISTICS}
     spec = specs[payload["which"]]
@@ -386,7 +392,7 @@ def sweep_chunk(payload: dict) -> dict:
     index = scenario.names.index(base.name)
     members = [dataclasses.replace(scenario, robots=scenario.robots[:index] + (robot,) + scenario.robots[index + 1:],
                                    steps=None, name=f"{scenario.name}-sweep")
-               for robot in sweep_robots(base, spec.axes)[a:b]]
+               for robot in sweep_robots(base, spec.axes, span=slice(a, b))]
     metrics = simulate(members, record=False, progress=payload["progress"]).metrics
     return {s: np.atleast_1d(getattr(metrics, f"error_{s}")[index]) for s in _STATISTICS}
 
