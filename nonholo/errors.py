@@ -21,6 +21,9 @@ class ScenarioError(NonholoInputError):
         where = f"{source}: {field}" if field else source
         super().__init__(f"{where}: {problem}")
 
+    def __reduce__(self):   # pickled with its fields (from a forked helper, a Dask worker)
+        return type(self), (self.source, self.field, self.problem), self.__dict__
+
 
 class ExpressionError(NonholoInputError):
     """A mathematical expression string that cannot be parsed safely. ``formula`` names the
@@ -47,6 +50,9 @@ class FormationError(NonholoInputError):
         where = f"robot {robot!r}: {field}: " if robot is not None else (f"{field}: " if field else "")
         super().__init__(f"{where}{problem}")
 
+    def __reduce__(self):
+        return type(self), (self.robot, self.field, self.problem), self.__dict__
+
 
 class InputFileError(NonholoInputError):
     """A file or text that cannot be read as input (TOML) within the limits: unreadable,
@@ -60,3 +66,6 @@ class InputFileError(NonholoInputError):
         self.source = source
         self.problem = problem
         super().__init__(f"{source}: {problem}")
+
+    def __reduce__(self):
+        return type(self), (self.source, self.problem), self.__dict__

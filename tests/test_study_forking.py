@@ -248,3 +248,120 @@ def test_without_processes_a_call_runs_here_when_asked():
     assert ran == [] and call.process is None
     assert call.result() == "value" and call.result() == "value"
     assert ran == [os.getpid()]
+
+
+def _delayed_draw_calls(original):
+    def delayed(calls, counter, connection):   # a child scheduled late, as on a loaded machine
+        time.sleep(0.4 if Path(calls[0][1][0]).name.startswith("A") else 0.0)
+        original(calls, counter, connection)
+    return delayed
+
+
+def _slow_append(path):
+    time.sleep(1.0)
+    _append_pid_slowly(path)
+
+
+@needs_fork
+def test_a_section_s_children_share_its_counter_whatever_their_timing(tmp_path, monkeypatch):
+    import nonholo.studies.forking as forking
+
+    monkeypatch.setattr(forking, "_draw_calls", _delayed_draw_calls(forking._draw_calls))
+    with Drawing(2) as drawing:
+        drawing(_slow_append, tmp_path / "P0")
+        drawing.start("P")                      # one process busy for a second
+        drawing(_append_pid_slowly, tmp_path / "A0")
+        drawing(_append_pid_slowly, tmp_path / "A1")
+        drawing.start("A")                      # waits for two free processes, then forks both
+        drawing(_append_pid_slowly, tmp_path / "B0")
+        drawing(_append_pid_slowly, tmp_path / "B1")
+        drawing.start("B")
+        result = drawing.finish()
+    assert all(entry["drawn"] == entry["figures"] for entry in result.values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["A0", "A1", "B0", "B1", "P0"]
+    assert all(len(p.read_text().split()) == 1 for p in tmp_path.iterdir())   # each drawn once
+    assert _reaped()
+
+
+@needs_fork
+def test_input_errors_from_a_forked_call_keep_their_type_and_fields():
+    import functools
+
+    from nonholo.errors import FormationError, InputFileError, ScenarioError
+
+    def raise_(exc):
+        raise exc
+
+    for exc in (ScenarioError("a.toml", "robots[0].gains.kp", "expected a number > 0, got -1"),
+                FormationError("f1", "leaders", "unknown robot 'ghost'"),
+                InputFileError("b.toml", "not valid TOML (line 3)")):
+        with pytest.raises(type(exc)) as caught:
+            ForkedCall(functools.partial(raise_, exc)).result()
+        assert str(caught.value) == str(exc) and caught.value.__dict__ == exc.__dict__
+
+
+def _children_of_command(marker: str) -> list[int]:
+    """Processes whose command line holds ``marker`` (a forked child keeps its parent's)."""
+    found = []
+    for pid in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as handle:
+                if marker.encode() in handle.read():
+                    found.append(int(pid))
+        except (OSError, ValueError):
+            pass
+    return found
+
+
+def _wait_gone(marker: str, seconds: float = 5.0) -> list[int]:
+    deadline = time.monotonic() + seconds
+    while _children_of_command(marker) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return _children_of_command(marker)
+
+
+@needs_fork
+@pytest.mark.parametrize("signum, code", [(15, 143), (1, 129), (9, -9)])
+def test_no_helper_outlives_a_stopped_study(tmp_path, signum, code):
+    out = tmp_path / f"report-{signum}"
+    command = [sys.executable, "-m", "nonholo", "study", "--quick", "--quiet", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120   # stopped once a helper runs (the leader's sweeps)
+        while len(_children_of_command(str(out))) < 2 and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(0.05)
+        assert len(_children_of_command(str(out))) >= 2, "no helper process was seen"
+        os.kill(process.pid, signum)
+        _, err = process.communicate(timeout=60)
+        assert process.returncode == code
+        assert "Traceback" not in err
+        assert _wait_gone(str(out)) == []
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        for pid in _children_of_command(str(out)):
+            os.kill(pid, 9)
+
+
+def test_a_tabulated_study_written_before_draw_still_draws_its_figures(tmp_path):
+    from nonholo.studies.framework import TabulatedStudyResult
+    from nonholo.studies.report import section_html
+
+    class Older(TabulatedStudyResult):
+        name, title, elapsed_s, runs, findings, quick = "older", "Older", 0.1, {}, [], False
+
+        def tables(self):
+            return []
+
+        def setup_text(self):
+            return "set-up"
+
+        def write_figures(self, folder):   # no ``draw``: it draws at once, as before
+            _plot([1, 3, 2], folder / "older.png")
+            return [("older.png", "its figure")]
+
+    drawing = Drawing(2)
+    html = section_html(Older(), tmp_path, drawing)
+    assert (tmp_path / "older.png").stat().st_size > 1000 and "its figure" in html
+    assert drawing.pending() == 0

@@ -7,7 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from nonholo.cli import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, collector_for_long_work, processes_count
+from nonholo.cli import (EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK, collector_for_long_work, processes_count,
+                         signals_interrupt)
 
 
 def register(subparsers) -> None:
@@ -44,7 +45,7 @@ def handle(args: argparse.Namespace) -> int:
                                processes=args.processes)
         chosen_studies(args.names)  # unknown names fail before any work
         import nonholo.studies.plots  # noqa: F401  (matplotlib: imported before the collector is tuned)
-        with collector_for_long_work():
+        with collector_for_long_work(), signals_interrupt():   # SIGTERM, SIGHUP: helpers reaped, as on Ctrl-C
             page, report_s = _run_studies(args, options, outcomes)
     except NonholoInputError as exc:
         print(f"nonholo study: {exc}", file=sys.stderr)

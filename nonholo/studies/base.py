@@ -35,7 +35,7 @@ class StudyOptions:
     quick: bool = False
     progress: bool = True
     sampling: str = "both"
-    processes: int = 2   # forked helpers at once: figures, independent parts (0: all here; ``studies.forking``)
+    processes: int = 0   # forked helpers at once: figures, independent parts (0: all here; ``studies.forking``)
 
     def __post_init__(self):
         if not isinstance(self.processes, int) or not 0 <= self.processes <= 16:

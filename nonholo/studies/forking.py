@@ -18,9 +18,13 @@ process sees the study's data as it is in memory: nothing is copied or pickled o
   child's exception in the parent.
 
 Both fall back to this process (in order, at the same points) where ``fork`` is not the safe
-default (anything but Linux) or with ``processes=0``; ``close`` stops and reaps every child
-(an interrupted study leaves none behind). A child is forked only while no progress line
-is being drawn: no thread of this process holds the terminal's lock when it forks.
+default (anything but Linux) or with ``processes=0`` (``StudyOptions``' default: a library
+caller, in a notebook with its own threads, opts in; ``nonholo study`` forks 2). ``close``
+stops and reaps every child (an interrupted study leaves none behind); a child ends with
+its parent, even a killed one, and leaves Ctrl-C to it. A child is forked only while no
+progress line of the study is being drawn (its ticker thread stopped), so that no thread
+of this process is writing to the terminal when it forks; tqdm's monitor thread may be
+alive, and the children never use tqdm.
 
 >>> calls = []
 >>> draw_now(calls.append, "figure.png")
@@ -31,6 +35,7 @@ is being drawn: no thread of this process holds the terminal's lock when it fork
 """
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import multiprocessing.connection
 import sys
@@ -54,6 +59,7 @@ def forking() -> bool:
 
 
 def _call_name(function: Callable) -> str:
+    function = getattr(function, "func", function)   # a functools.partial: its function's name
     return getattr(function, "__qualname__", None) or getattr(function, "__name__", None) or repr(function)
 
 
@@ -73,12 +79,53 @@ def _travelling(exc: BaseException, function: Callable) -> BaseException:
         return RuntimeError(f"{_call_name(function)} failed: {_one_line(exc)}")
 
 
+_HELD = ("SIGTERM", "SIGHUP", "SIGINT")
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Around a fork: the stopping signals wait (blocked), so that a child never runs its
+    parent's handlers before its own are set (``_as_child`` unblocks them)."""
+    import signal
+
+    held = {getattr(signal, name) for name in _HELD}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _as_child() -> None:
+    """A helper's signals: SIGTERM and SIGHUP end it at once (``close`` terminates it), Ctrl-C
+    is its parent's to handle (which then stops it), and it ends when its parent does, even
+    killed (Linux's parent-death signal). Forked with them held (``_signals_held``): they
+    are let through once its handlers are set."""
+    import os
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {getattr(signal, name) for name in _HELD})
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    parent = multiprocessing.parent_process()
+    if parent is not None and os.getppid() != parent.pid:   # the parent died before that
+        os._exit(1)
+
+
 def _draw_calls(calls: list, counter, connection) -> None:
     """A child's work: take the next figure's call from the shared counter until none is
     left and report each one drawn, ``("drawn", index)``; a failure is one line to the
     parent and exit code 1."""
     import os
 
+    _as_child()
     try:
         while True:
             with counter.get_lock():
@@ -109,7 +156,8 @@ def _fork_children(calls: list, processes: int, name: str) -> tuple[list, object
     for _ in range(min(processes, len(calls))):
         receiver, sender = context.Pipe(duplex=False)
         process = context.Process(target=_draw_calls, args=(calls, counter, sender), daemon=True, name=name)
-        process.start()
+        with _signals_held():
+            process.start()
         sender.close()
         children.append([process, receiver])
     return children, counter
@@ -179,6 +227,10 @@ class Drawing:
         ``RuntimeError`` with one line if a figure failed (every child reaped)."""
         self._wait(until_free=1, progress=progress)
         self._raise_failure()
+        lost = {name: e["figures"] - e["drawn"] for name, e in self.sections.items() if e["drawn"] != e["figures"]}
+        if lost:   # every child reported done: a figure neither drawn nor failed is a defect here
+            name, count = next(iter(lost.items()))
+            raise RuntimeError(f"figures of {name}: {count} of {self.sections[name]['figures']} were not drawn")
         return {name: {"figures": e["figures"], "drawn": e["drawn"], "seconds": e["seconds"]}
                 for name, e in self.sections.items()}
 
@@ -241,6 +293,7 @@ class Drawing:
 def _call(function: Callable, connection) -> None:
     """A child's work for ``ForkedCall``: the return value, or the exception (itself if it
     pickles, else a ``RuntimeError`` of one line)."""
+    _as_child()
     try:
         try:
             message = ("value", function())
@@ -264,7 +317,8 @@ class ForkedCall:
             self.connection, sender = context.Pipe(duplex=False)
             self.process = context.Process(target=_call, args=(function, sender), daemon=True,
                                            name=f"nonholo-{name}")
-            self.process.start()
+            with _signals_held():
+                self.process.start()
             sender.close()
 
     def result(self):

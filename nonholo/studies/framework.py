@@ -341,7 +341,11 @@ class TabulatedStudyResult(StudyResult):
                  f'<h2 id="{escape(self.name)}-tables">Tables</h2>']
         parts += [table.html() for table in self.tables()]
         parts.append(f'<h2 id="{escape(self.name)}-figures">Figures</h2>')
-        for name, caption in self.write_figures(folder, draw):
+        import inspect
+
+        # a result written before ``draw`` (``write_figures(self, folder)``) draws its own figures
+        drawn_by = "draw" in inspect.signature(self.write_figures).parameters
+        for name, caption in (self.write_figures(folder, draw) if drawn_by else self.write_figures(folder)):
             parts.append(html_figure(f"{folder.name}/{name}", caption))
         return "\n".join(parts)
 

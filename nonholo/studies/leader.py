@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import math
 import time
@@ -145,7 +146,8 @@ def run_leader(options: StudyOptions) -> "LeaderStudyResult":
                           lambda test=test: solver_step_statistics(canonical_scenario(test, False))))
     # the sweeps (small results, most of a first run's compiling) run in a process of their own
     # from the start, beside the tests; with processes=0 here, last, as before
-    with ForkedCall(lambda: simulate_gain_effects(options.quick), options.processes, "gain-sweeps") as sweeps:
+    with ForkedCall(functools.partial(simulate_gain_effects, options.quick), options.processes,
+                    "gain-sweeps") as sweeps:
         tasks.append(("gain sweeps", sweeps.result))
         outputs = {}
         with options.progress_for("study leader", len(tasks)) as progress:
