@@ -251,9 +251,9 @@ def test_without_processes_a_call_runs_here_when_asked():
 
 
 def _delayed_draw_calls(original):
-    def delayed(calls, counter, connection):   # a child scheduled late, as on a loaded machine
+    def delayed(calls, *rest):   # a child scheduled late, as on a loaded machine
         time.sleep(0.4 if Path(calls[0][1][0]).name.startswith("A") else 0.0)
-        original(calls, counter, connection)
+        original(calls, *rest)
     return delayed
 
 
@@ -365,3 +365,47 @@ def test_a_tabulated_study_written_before_draw_still_draws_its_figures(tmp_path)
     html = section_html(Older(), tmp_path, drawing)
     assert (tmp_path / "older.png").stat().st_size > 1000 and "its figure" in html
     assert drawing.pending() == 0
+
+
+@needs_fork
+def test_sections_of_the_same_name_keep_their_own_counts(tmp_path):
+    with Drawing(3) as drawing:
+        drawing(_append_pid_slowly, tmp_path / "a")
+        drawing(_append_pid_slowly, tmp_path / "b")
+        drawing.start("leader")
+        drawing(_append_pid_slowly, tmp_path / "c")
+        drawing.start("leader")
+        result = drawing.finish()
+    assert {name: (e["figures"], e["drawn"]) for name, e in result.items()} == {"leader": (2, 2),
+                                                                                 "leader (2)": (1, 1)}
+    assert all(len(p.read_text().split()) == 1 for p in tmp_path.iterdir())
+
+
+@needs_fork
+def test_figures_started_from_another_thread_outlive_that_thread(tmp_path):
+    import threading
+
+    drawing = Drawing(2)
+    drawing(_append_pid_slowly, tmp_path / "a")
+    drawing(_slow_append, tmp_path / "b")   # still drawing when the thread that forked it has ended
+    thread = threading.Thread(target=drawing.start, args=("section",))
+    thread.start()
+    thread.join()
+    assert drawing.finish()["section"]["drawn"] == 2
+    assert _reaped()
+
+
+def _in_a_daemon(queue):
+    queue.put((forking(), ForkedCall(lambda: os.getpid()).result() == os.getpid()))
+
+
+@needs_fork
+def test_a_daemonic_worker_computes_here_instead_of_forking():
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    worker = context.Process(target=_in_a_daemon, args=(queue,), daemon=True)
+    worker.start()
+    try:
+        assert queue.get(timeout=30) == (False, True)
+    finally:
+        worker.join(30)

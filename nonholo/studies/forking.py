@@ -39,6 +39,7 @@ import contextlib
 import multiprocessing
 import multiprocessing.connection
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -54,8 +55,17 @@ def draw_now(function: Callable, *args, **kwargs) -> None:
 
 
 def forking() -> bool:
-    """True where work may go to forked children (Linux)."""
-    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+    """True where work may go to forked children: Linux, and not inside a daemonic process
+    (a multiprocessing or Dask worker, which may have no children)."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+def _from_main_thread() -> bool:
+    """Whether a child forked now may be tied to its parent's life: Linux's parent-death signal
+    follows the forking *thread*, which must then be the main one (it lives as long as the
+    process)."""
+    return threading.current_thread() is threading.main_thread()
 
 
 def _call_name(function: Callable) -> str:
@@ -96,11 +106,11 @@ def _signals_held():
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def _as_child() -> None:
+def _as_child(tied: bool) -> None:
     """A helper's signals: SIGTERM and SIGHUP end it at once (``close`` terminates it), Ctrl-C
-    is its parent's to handle (which then stops it), and it ends when its parent does, even
-    killed (Linux's parent-death signal). Forked with them held (``_signals_held``): they
-    are let through once its handlers are set."""
+    is its parent's to handle (which then stops it), and, if ``tied`` (forked from the main
+    thread), it ends when its parent does, even killed (Linux's parent-death signal). Forked
+    with them held (``_signals_held``): they are let through once its handlers are set."""
     import os
     import signal
 
@@ -108,6 +118,8 @@ def _as_child() -> None:
     signal.signal(signal.SIGHUP, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {getattr(signal, name) for name in _HELD})
+    if not tied:
+        return
     try:
         import ctypes
 
@@ -119,13 +131,13 @@ def _as_child() -> None:
         os._exit(1)
 
 
-def _draw_calls(calls: list, counter, connection) -> None:
+def _draw_calls(calls: list, counter, connection, tied: bool) -> None:
     """A child's work: take the next figure's call from the shared counter until none is
     left and report each one drawn, ``("drawn", index)``; a failure is one line to the
     parent and exit code 1."""
     import os
 
-    _as_child()
+    _as_child(tied)
     try:
         while True:
             with counter.get_lock():
@@ -152,14 +164,21 @@ def _fork_children(calls: list, processes: int, name: str) -> tuple[list, object
     shared memory, freed while they still count on it, could become another counter)."""
     context = multiprocessing.get_context("fork")
     counter = context.Value("l", 0)
-    children = []
-    for _ in range(min(processes, len(calls))):
-        receiver, sender = context.Pipe(duplex=False)
-        process = context.Process(target=_draw_calls, args=(calls, counter, sender), daemon=True, name=name)
-        with _signals_held():
-            process.start()
-        sender.close()
-        children.append([process, receiver])
+    children, tied = [], _from_main_thread()
+    try:
+        for _ in range(min(processes, len(calls))):
+            receiver, sender = context.Pipe(duplex=False)
+            process = context.Process(target=_draw_calls, args=(calls, counter, sender, tied), daemon=True,
+                                      name=name)
+            try:
+                with _signals_held():   # a signal held meanwhile is raised as the block ends: counted first
+                    process.start()
+                    children.append([process, receiver])
+            finally:
+                sender.close()
+    except BaseException:   # an interrupt or a failed fork: none of the started ones is left running
+        _reap(children)
+        raise
     return children, counter
 
 
@@ -200,6 +219,8 @@ class Drawing:
         ``processes`` children once as many are free (the parent waits for a free one)."""
         calls, self.queued = self.queued, []
         entry = {"figures": len(calls), "drawn": 0, "started": time.perf_counter(), "seconds": 0.0, "children": 0}
+        if section in self.sections:   # the same name again (a library caller's): an entry of its own
+            section = f"{section} ({sum(name.split(' (')[0] == section for name in self.sections) + 1})"
         self.sections[section] = entry
         if not calls:
             return
@@ -290,10 +311,10 @@ class Drawing:
         self.close()
 
 
-def _call(function: Callable, connection) -> None:
+def _call(function: Callable, connection, tied: bool) -> None:
     """A child's work for ``ForkedCall``: the return value, or the exception (itself if it
     pickles, else a ``RuntimeError`` of one line)."""
-    _as_child()
+    _as_child(tied)
     try:
         try:
             message = ("value", function())
@@ -315,11 +336,16 @@ class ForkedCall:
         if processes > 0 and forking():
             context = multiprocessing.get_context("fork")
             self.connection, sender = context.Pipe(duplex=False)
-            self.process = context.Process(target=_call, args=(function, sender), daemon=True,
-                                           name=f"nonholo-{name}")
-            with _signals_held():
-                self.process.start()
-            sender.close()
+            self.process = context.Process(target=_call, args=(function, sender, _from_main_thread()),
+                                           daemon=True, name=f"nonholo-{name}")
+            try:
+                with _signals_held():
+                    self.process.start()
+            except BaseException:   # interrupted as the held signals came through: not left running
+                self.close()
+                raise
+            finally:
+                sender.close()
 
     def result(self):
         """The return value (waiting for the child); the child's exception is raised here,
@@ -346,9 +372,10 @@ class ForkedCall:
     def close(self) -> None:
         """Reap the child (stopped first if it has not answered yet)."""
         if self.process is not None:
-            if self._outcome is None and self.process.is_alive():
-                self.process.terminate()
-            self.process.join()
+            if self.process.pid is not None:   # (a fork that failed started nothing)
+                if self._outcome is None and self.process.is_alive():
+                    self.process.terminate()
+                self.process.join()
             self.connection.close()
             self.process = None
 
