@@ -133,11 +133,10 @@ def tune_memory() -> dict[str, bool]:
     return taken
 
 
-MAX_PROCESSES = 16
-
-
 def processes_count(text: str) -> int:
     """``--processes N``: a whole number from 0 to ``MAX_PROCESSES`` (an argparse type)."""
+    from nonholo.studies.forking import MAX_PROCESSES
+
     try:
         value = int(text)
     except ValueError:

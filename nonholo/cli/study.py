@@ -33,7 +33,6 @@ def register(subparsers) -> None:
     parser.set_defaults(handler=handle)
 
 
-
 def handle(args: argparse.Namespace) -> int:
     from nonholo.errors import NonholoInputError
     from nonholo.studies import StudyOptions

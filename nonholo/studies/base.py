@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from nonholo.studies.forking import draw_now
+from nonholo.studies.forking import MAX_PROCESSES, draw_now
 
 SAMPLINGS = ("uniform", "solver-steps", "both")
 
@@ -38,10 +38,10 @@ class StudyOptions:
     processes: int = 0   # forked helpers at once: figures, independent parts (0: all here; ``studies.forking``)
 
     def __post_init__(self):
-        if not isinstance(self.processes, int) or not 0 <= self.processes <= 16:
+        if not isinstance(self.processes, int) or not 0 <= self.processes <= MAX_PROCESSES:
             from nonholo.errors import NonholoInputError
 
-            raise NonholoInputError(f"processes must be a whole number from 0 to 16, not "
+            raise NonholoInputError(f"processes must be a whole number from 0 to {MAX_PROCESSES}, not "
                                     f"{self.processes!r}")
         if self.sampling not in SAMPLINGS:
             from nonholo.errors import NonholoInputError

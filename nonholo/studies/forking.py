@@ -45,6 +45,8 @@ from collections.abc import Callable
 
 #: child processes at once, by default: the machines this is made for have two cores
 PROCESSES = 2
+#: the most a caller may ask for (``StudyOptions``, ``--processes``)
+MAX_PROCESSES = 16
 #: how long ``finish`` and a section waiting for a free process block between looks (seconds)
 POLL_S = 0.2
 
@@ -220,7 +222,8 @@ class Drawing:
         calls, self.queued = self.queued, []
         entry = {"figures": len(calls), "drawn": 0, "started": time.perf_counter(), "seconds": 0.0, "children": 0}
         if section in self.sections:   # the same name again (a library caller's): an entry of its own
-            section = f"{section} ({sum(name.split(' (')[0] == section for name in self.sections) + 1})"
+            section = next(f"{section} ({n})" for n in range(2, len(self.sections) + 2)
+                           if f"{section} ({n})" not in self.sections)
         self.sections[section] = entry
         if not calls:
             return

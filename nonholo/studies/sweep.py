@@ -376,14 +376,11 @@ def sweep_chunk(payload: dict) -> dict:
     specs = _specs(payload["specs"])
     a, b = payload["range"]
     if payload["which"] is None:
-        robots, start = [], 0
-        for number, spec in enumerate(specs):   # only the chunk's robots are built
-            points = int(np.prod([x.values.size for x in spec.axes]))
-            lo, hi = max(a - start, 0), min(b - start, points)
+        robots = []
+        for number, (spec, span, base) in enumerate(zip(specs, *_spans(scenario, specs))):
+            lo, hi = max(a, span.start) - span.start, min(b, span.stop) - span.start   # the chunk's robots only
             if lo < hi:
-                base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
                 robots += sweep_robots(base, spec.axes, f"{number}:" if len(specs) > 1 else "", slice(lo, hi))
-            start += points
         batch = dataclasses.replace(scenario, robots=tuple(robots), steps=None, name=f"{scenario.name}-sweep")
         metrics = simulate(batch, record=False, progress=payload["progress"]).metrics
         return {s: np.atleast_1d(getattr(metrics, f"error_{s}")) for s in _STATISTICS}
