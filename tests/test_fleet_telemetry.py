@@ -98,7 +98,7 @@ def test_a_keyless_client_gets_nothing_and_the_fleet_is_unaffected(tmp_path):
     finally:
         stop.set()
         attacker.join(30)
-        endpoint.stop()
+        endpoint.stop(drain_s=10.0)   # the slow observer's backlog: every robot's last status
     assert_same_result(simulate(scenario), fleet.result)
     assert set(seen) == set(NAMES) and all(s[-1]["state"] == "done" for s in seen.values())
     assert endpoint.hub.rejected == 0 and sum(endpoint.hub.received.values()) >= 3 * 5
@@ -107,6 +107,41 @@ def test_a_keyless_client_gets_nothing_and_the_fleet_is_unaffected(tmp_path):
     # hold a two-letter name by chance); no name anywhere else
     assert not any(name.encode() in got[:13] + got[45:] for got in results["bytes"] for name in NAMES)
     assert results["hello"] and "linked" not in results["hello"]
+
+
+class StalledObserver:
+    """A live view's observer stalled for 2 s (on the endpoint's event loop) once every robot
+    has linked: the robots end while what they sent is still in flight."""
+    period_s = 0.05
+
+    def __init__(self):
+        self.seen, self.stalled = {}, False
+
+    def status(self, name, status):
+        self.seen.setdefault(name, []).append(status)
+        if len(self.seen) == len(NAMES) and not self.stalled:
+            self.stalled = True
+            time.sleep(2.0)
+
+
+def test_a_fleet_run_waits_for_its_observer_to_read_every_robots_last_status(tmp_path):
+    path, scenario, config = fleet_file(tmp_path, duration=1.0)
+    observer = StalledObserver()
+    run_fleet(scenario, "tcp", config=config, source=path, observer=observer, wait_s=15.0)
+    assert set(observer.seen) == set(NAMES)
+    assert all(s[-1]["state"] == "done" for s in observer.seen.values()), \
+        {name: s[-1]["state"] for name, s in observer.seen.items()}
+
+
+def test_an_observer_stops_at_once_without_draining_and_drains_within_its_bound():
+    endpoint = ObserverThread(fleet_keys(NAMES), lambda name, status: None).start()
+    started = time.monotonic()
+    endpoint.stop()
+    assert time.monotonic() - started < 1.0
+    endpoint = ObserverThread(fleet_keys(NAMES), lambda name, status: None).start()
+    started = time.monotonic()
+    endpoint.stop(drain_s=5.0)          # no robot linked, nothing in flight: nothing to wait for
+    assert time.monotonic() - started < 1.0
 
 
 def test_an_endpoint_without_the_keys_gets_no_status(tmp_path):

@@ -13,7 +13,9 @@ observer (hub name ``observer``) and sends an ACL ``inform`` (ontology
 wins: a status is built only once the previous one has left, so a slow observer gets fewer
 statuses, never a queue; the sender is a task of its own, so the control loop never waits for
 it; a link that accepts nothing for ``LIMITS.write_timeout`` is dropped and retried with
-backoff.
+backoff. A robot's last status ("done") is sent at its end (it waits at most ``FINAL_WAIT_S``);
+the observer of a fleet run reads what its robots sent before they ended (at most ``DRAIN_S``
+once they have) before it stops, so that a slow observer still sees every robot done.
 
 Keys: the link and its envelopes use, per robot, a key derived from its fleet key
 (HMAC-SHA256 of ``KEY_LABEL``), so nothing a robot sends its observer can pass on a robot link,
@@ -56,6 +58,7 @@ OBSERVER = "observer"
 ONTOLOGY = "nonholo-telemetry-v1"
 PERIOD_S = 0.05                # a robot's status at 20 Hz (wall time)
 FINAL_WAIT_S = 1.0             # longest wait for the last status at the end of a run
+DRAIN_S = 3.0                  # longest wait of an observer, once its robots have ended, for what they sent
 START_TIMEOUT_S = 10.0
 KEY_LABEL = b"nonholo observer link v1"
 LIMITS = StreamLimits(write_timeout=2.0, send_queue_frames=4, inbox_frames_per_peer=8)
@@ -375,6 +378,18 @@ class ObserverHub:
         self.received[peer] += 1
         self.on_status(peer, status)
 
+    async def drain(self, timeout: float) -> bool:
+        """Wait, at most ``timeout`` s, until every robot's link has closed and each status it
+        sent has reached ``on_status``; True when all has. (A robot that has ended has closed
+        its link; its statuses still in flight are read before the end of its stream.)"""
+        loop = asyncio.get_running_loop()
+        end = loop.time() + timeout
+        while self.hub.peers or not self.hub.inbox.empty():
+            if loop.time() >= end:
+                return False
+            await asyncio.sleep(0.01)
+        return True
+
     async def close(self) -> None:
         if self._task is not None:
             self._task.cancel()
@@ -392,6 +407,7 @@ class ObserverThread:
         self.host, self.port = host, port
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
+        self._drain_s = 0.0
         self._started = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._serve, name="nonholo-observer", daemon=True)
@@ -426,10 +442,15 @@ class ObserverThread:
         self._started.set()
         try:
             await self._stopping.wait()
+            if self._drain_s > 0:
+                await self.hub.drain(self._drain_s)
         finally:
             await self.hub.close()
 
-    def stop(self) -> None:
+    def stop(self, drain_s: float = 0.0) -> None:
+        """Stop serving. ``drain_s`` > 0: first wait (at most that long) for the statuses
+        that robots which have ended sent before their end (see ``ObserverHub.drain``)."""
+        self._drain_s = max(0.0, float(drain_s))
         loop, stopping = self._loop, self._stopping
         if loop is not None and stopping is not None and self._thread.is_alive():
             try:
@@ -437,7 +458,7 @@ class ObserverThread:
             except RuntimeError:   # the loop has just closed
                 return
         if self._thread.is_alive():
-            self._thread.join(START_TIMEOUT_S)
+            self._thread.join(START_TIMEOUT_S + self._drain_s)
 
 
 @contextmanager
@@ -460,8 +481,11 @@ def watched_processes(observer, names, keys: Path | None, observe: str | None, s
         endpoint = ObserverThread(keys_from_file(keys, names, names), observer.status).start()
         try:
             yield keys, options + ["--observe", endpoint.address]
-        finally:
+        except BaseException:
             endpoint.stop()
+            raise
+        # the robots have ended: their last statuses ("done") still in flight reach the observer
+        endpoint.stop(drain_s=DRAIN_S)
     finally:
         if private is not None:
             shutil.rmtree(private, ignore_errors=True)
