@@ -227,8 +227,24 @@ def test_an_age_of_exactly_stale_after_is_not_stale():
     # third fresh message (t = 0.15, 0.2, 0.25: stopping at 0 … 0.2, five instants)
     events = lambda result: result.to_dict()["robots"]["f"]["events"]   # noqa: E731
     assert (events(at_limit)["watchdog_stops"], events(at_limit)["watchdog_stopped_s"]) == (1, pytest.approx(0.25))
-    assert (events(beyond)["watchdog_stops"], events(beyond)["watchdog_stopped_s"]) == (1, pytest.approx(6.05))
+    # stopped all the run: its 6 s (the instant at its end holds nothing: it is not counted)
+    assert scenario.duration == 6.0
+    assert (events(beyond)["watchdog_stops"], events(beyond)["watchdog_stopped_s"]) == (1, pytest.approx(6.0))
     assert "watchdog_stops" not in simulate(scenario).to_dict()["robots"]["f"]["events"]   # no link model
+
+
+@pytest.mark.parametrize("duration", [6.03, 0.05])
+def test_the_stopped_time_counts_a_last_period_cut_short_only_as_far_as_the_run_goes(duration):
+    """A follower stopped all the run (its parent's states arrive too late) is stopped for the
+    run's duration: the last control period (0.03 of 0.05 s) counts 0.03 s, the instant at the
+    end of the run (t = 0.05 in a one-period run) nothing; the lockstep fleet counts alike."""
+    scenario = parse_scenario(CIRCLE_PAIR.replace("duration = 6.0", f"duration = {duration}"))
+    scenario = dataclasses.replace(scenario, network=LinkSettings(
+        seed=1, default=LinkModel(delay=0.2), watchdog=WatchdogConfig(stale_after=0.15)))
+    central = simulate(scenario).to_dict()["robots"]["f"]["events"]
+    assert (central["watchdog_stops"], central["watchdog_stopped_s"]) == (1, pytest.approx(duration, abs=1e-12))
+    fleet = run_fleet(scenario, "inproc").result.to_dict()["robots"]["f"]["events"]   # its [network] links
+    assert fleet["watchdog_stopped_s"] == pytest.approx(duration, abs=1e-12)
 
 
 @pytest.mark.parametrize("field", ["decel_v", "decel_omega", "stale_after"])

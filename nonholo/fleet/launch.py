@@ -130,7 +130,7 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     elapsed = time.perf_counter() - started
     by_name = {r["name"]: r for r in reports}
     watchdog = np.array([[sum(e.get("event") == "stop" for e in by_name[name]["events"]),
-                          by_name[name].get("stopped_instants", 0)] for name in scenario.names], dtype=float).T
+                          by_name[name].get("stopped_periods", 0.0)] for name in scenario.names], dtype=float).T
     result = score_states(scenario, planned, states, helds, elapsed, watchdog)
     network = network_report(reports, transport, mode, elapsed, scenario)
     network["stale_after"] = config.watchdog.stale_after

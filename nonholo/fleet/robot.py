@@ -138,7 +138,7 @@ class RobotProgram:
         self.inbox: dict[str, deque] = {p: deque(maxlen=PARENT_STATES) for p in setup.parents}
         self.latest: dict[str, msg.RobotState] = {}
         self.predict = False   # lockstep: parents' messages advanced over their age (run_lockstep)
-        self.stopped_instants = 0   # control instants the watchdog spent stopping or stopped
+        self.stopped_periods = 0.0   # control periods (within the run) spent stopping or stopped
         self.subscribers: set[str] = set()
         self.agreed: set[str] = set()
         self.progress = {child: -1 for child in setup.children}
@@ -297,14 +297,17 @@ class RobotProgram:
         finally:
             self.latest, self.branch = latest, branch
 
-    def _guarded(self, guard: WatchdogState, age: float, new: bool, command: tuple, period: float, t: float,
+    def _guarded(self, guard: WatchdogState, age: float, new: bool, command: tuple, period: float, k: int, t: float,
                  at: float | None = None) -> tuple[WatchdogState, tuple]:
-        """The watchdog's step at a control instant (spec fleet.md §5): its next state and
-        the command to hold, the law's ``command`` or, while stopping, the ramp to zero. A
-        stop or resume is recorded at run time ``t`` (and monotonic time ``at``, realtime)."""
+        """The watchdog's step at the control instant of output step ``k`` (spec fleet.md
+        §5): its next state and the command to hold, the law's ``command`` or, while
+        stopping, the ramp to zero. A stop or resume is recorded at run time ``t`` (and
+        monotonic time ``at``, realtime)."""
         guard, v, omega, event = watchdog_step(self.watchdog, guard, age, new, command[0], command[1], period)
         self.guard = guard   # explicit data, for observers
-        self.stopped_instants += guard.mode != FOLLOWING
+        if guard.mode != FOLLOWING:   # the part of the instant's period in the run (0 at its end)
+            every = self.setup.hold_every
+            self.stopped_periods += (min(k + every, self.setup.n_steps) - k) / every
         if event is not None:
             stamp = {} if at is None else {"at": at}
             self._event({"t": t, "event": event, "age": age if age != float("inf") else None, **stamp})
@@ -386,7 +389,7 @@ class RobotProgram:
                     else:
                         command = (0.0,) * kn.HELD_COUNT
                     if s.parents:
-                        guard, command = self._guarded(guard, age, new, command, period, instant * period)
+                        guard, command = self._guarded(guard, age, new, command, period, k, instant * period)
                     held = command
                     v, omega = held[0], held[1]
                     self.plant.command(v, omega)
@@ -526,7 +529,7 @@ class RobotProgram:
                     command = self._command(k, x, y, theta, xi) if all(self.inbox[p] for p in s.parents) \
                         else (0.0,) * kn.HELD_COUNT
                     if s.parents:
-                        guard, command = self._guarded(guard, age, new, command, period, now - start, now)
+                        guard, command = self._guarded(guard, age, new, command, period, k, now - start, now)
                     held = command
                     self.plant.command(held[0], held[1])
                     await self._publish(k, instant, x, y, theta, held[0], held[1], t=clock())
@@ -609,7 +612,7 @@ class RobotProgram:
                 "age_times": {p: [float(i * self.setup.dt * self.setup.hold_every)
                                   for i in np.flatnonzero(~np.isnan(ages))] for p, ages in self.ages.items()},
                 "latency": {p: list(samples) for p, samples in self.latency.items()},
-                "events": list(self.events), "stopped_instants": int(self.stopped_instants),
+                "events": list(self.events), "stopped_periods": float(self.stopped_periods),
                 "transport": self.transport.stats(),
                 "period": {"mean": float(periods.mean()) if periods.size else None,
                            "std": float(periods.std()) if periods.size else None,

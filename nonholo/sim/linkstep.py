@@ -28,7 +28,8 @@ its count of fresh states and the l–φ bearing's branch as the follower sees i
 ``watchdog`` (4, B) stale_after, resume_after, decel_v, decel_omega of each copy;
 ``predict`` (B,) 1.0 where a copy's followers predict, else 0.0. ``stats``: the kernel's
 statistics, whose rows ``WATCHDOG_STOPS`` and ``WATCHDOG_STOPPED`` count each follower's
-watchdog stops and the control instants it spent stopping or stopped.
+watchdog stops and the control periods it spent stopping or stopped (an instant's period
+counts as far as it lies in the run: ``lived``, 0 for an instant at the run's end).
 """
 from __future__ import annotations
 
@@ -54,10 +55,12 @@ GUARD_COUNT = 3
 # As the formation kernels and the fleet's follower steps compile: no fast-math, no FMA
 # contraction, so that a follower's command here is bit for bit the robot program's.
 @njit(cache=True, error_model="numpy")
-def link_instant(c, period, state, fields, limits, targets, target_row, offsets, kinds, order, parents, feeds,
+def link_instant(c, period, lived, state, fields, limits, targets, target_row, offsets, kinds, order, parents, feeds,
                  sin_floor, instant, held, schedule, ring, inbox, used, guard, watchdog, predict, stats):
     """Control instant ``c`` (see the module docstring): sets ``held`` (HELD_COUNT, R, B) of
-    every robot from the roots' commands in ``instant`` and the followers' linked commands."""
+    every robot from the roots' commands in ``instant`` and the followers' linked commands;
+    ``lived``: the part of its period that lies in the run (1, less for a last period cut
+    short, 0 at the run's end), as it counts in ``WATCHDOG_STOPPED``."""
     n_batch = state.shape[2]
     depth = ring.shape[1]
     slot_now = c % depth
@@ -114,7 +117,7 @@ def link_instant(c, period, state, fields, limits, targets, target_row, offsets,
                     watchdog[2, b], watchdog[3, b], period)
                 guard[G_MODE, r, b] = 1.0 if stopping else 0.0
                 stats[kn.WATCHDOG_STOPS, r, b] += 1.0 if event == STOP else 0.0
-                stats[kn.WATCHDOG_STOPPED, r, b] += 1.0 if stopping else 0.0
+                stats[kn.WATCHDOG_STOPPED, r, b] += lived if stopping else 0.0
                 guard[G_FRESH, r, b] = fresh
                 if stopping:
                     v, omega, xi_dot, singular, sat_v, sat_w = v_out, omega_out, 0.0, 0.0, 0.0, 0.0
@@ -190,10 +193,10 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
             row = int(row_start[k])
             evaluate(state, fields, limits, tuple(rows[row]), targets, row, group.offsets, group.kinds, group.order,
                      group.parents, branch, scenario.sin_floor, instant)
-            link_instant(c, period, state, fields, limits, targets, row, group.offsets, group.kinds, group.order,
-                         group.parents, group.feeds, scenario.sin_floor, instant, held, schedule, ring, inbox, used,
-                         guard, watchdog, predict, outputs[0])
             k_stop = min(k + every, n_steps)
+            link_instant(c, period, (k_stop - k) / every, state, fields, limits, targets, row, group.offsets,
+                         group.kinds, group.order, group.parents, group.feeds, scenario.sin_floor, instant, held,
+                         schedule, ring, inbox, used, guard, watchdog, predict, outputs[0])
             # The kernel processes output step k_stop too when it is the last one: stop short of
             # it when it is a control instant (the next pass sets its commands first).
             last = n_steps + 1 if k < n_steps and k_stop == n_steps and n_steps % every == 0 else n_steps
