@@ -75,11 +75,12 @@ def test_separation_bearing_closed_loop_is_exactly_exponential():
     result = simulate_formation(formation)
     t = result.t
     e_l, e_phi = result.output_errors("f1")
-    np.testing.assert_allclose(e_l, 1.0 * np.exp(-1.5 * t), atol=2e-8)
-    np.testing.assert_allclose(e_phi, (math.pi - math.pi / 3) * np.exp(-0.6 * t), atol=2e-8)
+    # errors desired minus actual (spec README): l_d − l = −1 m, φ_d − φ = −(π − π/3) at the start
+    np.testing.assert_allclose(e_l, -1.0 * np.exp(-1.5 * t), atol=2e-8)
+    np.testing.assert_allclose(e_phi, -(math.pi - math.pi / 3) * np.exp(-0.6 * t), atol=2e-8)
     l_rate, phi_rate = result.output_rates("f1")
-    np.testing.assert_allclose(l_rate, -1.5 * e_l, atol=1e-9)
-    np.testing.assert_allclose(phi_rate, -0.6 * e_phi, atol=1e-9)
+    np.testing.assert_allclose(l_rate, 1.5 * e_l, atol=1e-9)      # l̇ = k1 (l_d − l)
+    np.testing.assert_allclose(phi_rate, 0.6 * e_phi, atol=1e-9)
     # the model rates agree with the integrated trajectory (finite differences)
     l, _ = result.outputs("f1")
     np.testing.assert_allclose(np.gradient(l, t)[5:-5], l_rate[5:-5], atol=2e-4)
@@ -124,7 +125,7 @@ def test_eq_5_9_switch_passes_behind_and_settles_in_ln50():
 @pytest.mark.parametrize("dt", [0.01, 0.0025])
 def test_step_change_is_integrated_on_its_new_target(dt):
     """Across a step at t = at (on the grid) the closed loop stays exactly φ̇ = k2 (φ_d − φ),
-    l̇ = k1 (l_d − l): after the step φ − φ_d = −π e^{−k2 (t − at)} to integration accuracy,
+    l̇ = k1 (l_d − l): after the step φ_d − φ = π e^{−k2 (t − at)} to integration accuracy,
     and l is not disturbed (spec §2.2, §6 b). The sample at t = at still shows the old target.
     (Taking the old target at the first RK4 stage after the step left π·k2·dt/6: 5e-3 rad.)"""
     at, k2 = 20.0, 1.3
@@ -135,7 +136,7 @@ def test_step_change_is_integrated_on_its_new_target(dt):
     t = result.t
     e_l, e_phi = result.output_errors("f1")
     after = t > at + 1e-9
-    np.testing.assert_allclose(e_phi[after], -math.pi * np.exp(-k2 * (t[after] - at)), rtol=0, atol=1e-7)
+    np.testing.assert_allclose(e_phi[after], math.pi * np.exp(-k2 * (t[after] - at)), rtol=0, atol=1e-7)
     at_step = np.searchsorted(t, at)
     assert abs(e_phi[at_step]) < 1e-7     # the sample at the step: the old target, met
     # l only goes on decaying from the start (e^{−k1 at} = 1.1e-7 m left at the step; the
@@ -191,8 +192,8 @@ def test_separation_separation_test1_reference_numbers():
     assert m["l2_error"]["mean"] == pytest.approx(0.01194, rel=6e-3)
     assert m["safety"]["min_abs_sin_gamma_difference"] == pytest.approx(0.707, abs=1e-3)
     r1, r2 = result.output_rates("F")
-    np.testing.assert_allclose(r1, -e1, atol=1e-9)
-    np.testing.assert_allclose(r2, -e2, atol=1e-9)
+    np.testing.assert_allclose(r1, e1, atol=1e-9)      # l̇i = k (li_d − li), k = 1
+    np.testing.assert_allclose(r2, e2, atol=1e-9)
 
 
 def test_wedge_is_nearly_singular_and_reported():
@@ -265,7 +266,7 @@ def test_batch_matches_single_runs_and_solve_ivp():
     for member, formation in enumerate(formations):
         single = simulate_formation(formation)
         np.testing.assert_allclose(batch.output_errors("f1", member)[0], single.output_errors("f1")[0], atol=1e-10)
-        np.testing.assert_allclose(batch.output_errors("f1", member)[0], np.exp(-gains[member][0] * batch.t), atol=1e-6)
+        np.testing.assert_allclose(batch.output_errors("f1", member)[0], -np.exp(-gains[member][0] * batch.t), atol=1e-6)
     scipy = simulate_formation(Formation([eight_leader(), behind()], references.eight(), duration=10.0,
                                          method="solve_ivp"))
     np.testing.assert_allclose(scipy.output_errors("f1")[1], batch.output_errors("f1", 0)[1], atol=1e-7)

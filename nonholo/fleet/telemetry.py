@@ -116,7 +116,7 @@ def robot_state(program, k: int) -> str:
 
 
 def link_errors(program, k: int, follower, parent_pose) -> tuple:
-    """The follower's output errors z − z_d at step k (l, φ or l1, l2); None without parents' poses."""
+    """The follower's output errors z_d − z at step k (l, φ or l1, l2); None without parents' poses."""
     s = program.setup
     poses = [parent_pose(p, k) for p in s.parents]
     if k < 0 or not poses or any(p is None for p in poses):
@@ -125,10 +125,10 @@ def link_errors(program, k: int, follower, parent_pose) -> tuple:
     target = s.targets[k]
     if len(poses) == 1:
         l, phi, _ = separation_bearing(poses[0], follower, d)
-        return float(l) - target[0], float(wrap(float(phi) - target[1]))
+        return target[0] - float(l), float(wrap(target[1] - float(phi)))
     l1 = float(separation_bearing(poses[0], follower, d)[0])
     l2 = float(separation_bearing(poses[1], follower, d)[0])
-    return l1 - target[0], l2 - target[1]
+    return target[0] - l1, target[1] - l2
 
 
 def link_age(program, parent: str, k: int) -> float | None:

@@ -595,7 +595,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                             state[0, p2, b], state[1, p2, b], state[2, p2, b], instant[I_V, p2, b], z1_d, z2_d,
                             targets[target_row, 2, r], targets[target_row, 3, r], fields[K1, r, b], fields[K2, r, b],
                             fields[OFFSET_D, r, b], sin_floor, v_max, omega_max)
-                    err1, err2 = out1 - z1_d, out2 - z2_d
+                    err1, err2 = z1_d - out1, z2_d - out2   # desired minus actual (spec README)
                 else:
                     v = omega = sat_v = sat_w = err1 = err2 = 0.0
                 instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_XI_DOT, r, b] = v, omega, xi_dot

@@ -188,7 +188,8 @@ class SimulationResult:
         return self._recorded()[k.REC_OUT1, :, i, member], self._recorded()[k.REC_OUT2, :, i, member]
 
     def output_errors(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Signed output errors z − z_d of a follower over time (φ on its continuous branch)."""
+        """Signed output errors z_d − z of a follower over time, desired minus actual as every
+        error (spec README; φ on its continuous branch)."""
         i = self.index(robot)
         return self._recorded()[k.REC_ERR1, :, i, member], self._recorded()[k.REC_ERR2, :, i, member]
 
@@ -351,8 +352,8 @@ class SimulationResult:
         columns ``t, robot, role, x, y, theta, xi, v, omega, error_1, error_2`` (units in
         ``TABLE_COLUMNS``); ``every`` keeps one sample in that many. The errors depend on the
         role: a root's (tracking or posture) position error norm ‖p_d − p‖ in m and heading error
-        wrap(θ_d − θ) in rad; a follower's output errors z − z_d (l − l_d in m and φ − φ_d in rad,
-        or l1 − l1_d and l2 − l2_d in m), signed as ``output_errors``."""
+        wrap(θ_d − θ) in rad; a follower's output errors z_d − z (l_d − l in m and φ_d − φ in rad,
+        or l1_d − l1 and l2_d − l2 in m), signed as ``output_errors``."""
         record = self._recorded()[:, ::every, :, member]
         times = self.t[::every]
         header = ["t", "robot", "role"] + [c[0] for c in TABLE_COLUMNS]

@@ -198,12 +198,12 @@ def _first_sample_after(t: np.ndarray, at: float) -> int:
 
 def step_onset_deviation(result: FormationResult, follower: Follower, output: int = 1) -> float:
     """|e(t1) − e_ideal(t1)| at the first sample t1 after the first step change of ``output``,
-    where the ideal step jumps the error by −Δ exactly at ``at`` and then decays as e^(−kt)."""
+    where the ideal step jumps the error z_d − z by +Δ exactly at ``at`` and then decays as e^(−kt)."""
     at, start, end, _ = next(s for s in target_segments(follower)[output] if s[3] == 0.0)
     t, error = result.t, result.output_errors(follower.name)[output]
     gain = (follower.k1, follower.k2)[output]
     first, before = _first_sample_after(t, at), int(np.searchsorted(t, at - 1e-9 * max(1.0, at)))
-    ideal = (error[before] * math.exp(-gain * (at - t[before])) - (end - start)) * math.exp(-gain * (t[first] - at))
+    ideal = (error[before] * math.exp(-gain * (at - t[before])) + (end - start)) * math.exp(-gain * (t[first] - at))
     return abs(float(error[first]) - ideal)
 
 
@@ -590,7 +590,7 @@ def time_window(result: FormationResult, start: float, stop: float) -> Formation
 
 
 def _target(result: FormationResult, follower: str, output: int) -> np.ndarray:
-    return result.outputs(follower)[output] - result.output_errors(follower)[output]
+    return result.outputs(follower)[output] + result.output_errors(follower)[output]
 
 
 def plot_bearing_outputs(study: FormationStudyResult, path: Path) -> None:

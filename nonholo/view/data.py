@@ -3,7 +3,7 @@ MCAP recording (``nonholo.view.record``) or the ``--out`` directory of ``nonholo
 (``result.json`` + ``trajectories.csv``).
 
 A ``Replay`` holds, on one time grid, each robot's pose, command and its two errors (a
-follower's link output errors z − z_d, l and φ or l1 and l2; a root's position error and
+follower's link output errors z_d − z, l and φ or l1 and l2; a root's position error and
 heading error), the reference point and the robots' roles and parents.
 """
 from __future__ import annotations

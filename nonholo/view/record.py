@@ -12,7 +12,7 @@ topic                           schema                  content
 ``/reference/pose``             foxglove.PoseInFrame    the reference point (x_d, y_d, θ_d)
 ``/scene``                      foxglove.SceneUpdate    reference path, trails, formation links
 ``/robots/NAME/command``        nonholo.Command         v (m/s), ω (rad/s)
-``/robots/NAME/errors``         nonholo.Errors          a follower's link errors z − z_d (l, φ or
+``/robots/NAME/errors``         nonholo.Errors          a follower's link errors z_d − z (l, φ or
                                                         l1, l2), a root's position and heading error
 ``/links``                      nonholo.Links           per link parent→child: distance, errors
 ==============================  ======================  =====================================
@@ -83,7 +83,7 @@ SCENE_UPDATE = _object("foxglove.SceneUpdate", {"deletions": ARRAY, "entities": 
                        "An update to the entities displayed in a 3D scene")
 COMMAND = _object("nonholo.Command", {"timestamp": TIME, "v": NUMBER, "omega": NUMBER},
                   "The command a robot holds: v (m/s), omega (rad/s)")
-ERRORS = _object("nonholo.Errors", {"timestamp": TIME}, "A follower's link output errors z - z_d (named after "
+ERRORS = _object("nonholo.Errors", {"timestamp": TIME}, "A follower's link output errors z_d - z (named after "
                  "its outputs: l and phi, or l1 and l2) or a root's position (m) and heading (rad) error")
 LINKS = _object("nonholo.Links", {"timestamp": TIME, "links": {"type": "object"}},
                 "Per formation link parent->child: axle distance (m) and the follower's output errors")
