@@ -2,6 +2,8 @@
 snapshots against its result, and the view command's bad inputs (one line, exit 2)."""
 import asyncio
 import json
+import logging
+import socket
 import threading
 import time
 import urllib.error
@@ -20,6 +22,7 @@ from nonholo.cli import main  # noqa: E402
 from nonholo.fleet.launch import run_fleet  # noqa: E402
 from nonholo.fleet.robot import ACK_EVERY, WINDOW  # noqa: E402
 from nonholo.view.feed import FleetObserver, LatestFeed  # noqa: E402
+from nonholo.view import server as view_server  # noqa: E402
 from nonholo.view.server import RATE_HZ, ViewServer  # noqa: E402
 
 WAIT_S = 10.0
@@ -55,6 +58,66 @@ def test_every_request_needs_the_token(replay_server):
     assert get(f"{base}/nothing?token={token}")[0] == 404
     assert get(f"{base}/live?token={token}")[0] == 503      # a replay has no live feed
     assert replay_server.refused >= 30
+
+
+def closed_by_peer(sock: socket.socket, within_s: float) -> bool:
+    """True when the server closes ``sock`` within ``within_s`` (what it sent is read)."""
+    sock.settimeout(within_s)
+    try:
+        while sock.recv(4096):
+            pass
+    except socket.timeout:
+        return False
+    except OSError:      # reset: closed too
+        pass
+    return True
+
+
+def test_connections_are_bounded_and_those_without_the_token_expire(monkeypatch):
+    """A flood of silent connections holds at most MAX_CONNECTIONS, cannot keep a page out (a
+    new connection closes one not yet proven) and each is closed REQUEST_DEADLINE_S after it
+    connected; a slow client trickling a request too; responses name no server software."""
+    monkeypatch.setattr(view_server, "MAX_CONNECTIONS", 8)
+    monkeypatch.setattr(view_server, "REQUEST_DEADLINE_S", 1.0)
+    page = {"mode": "replay", "t": [0.0], "robots": [], "reference": None, "links": {}, "title": "x"}
+    with ViewServer(lambda: page) as server:
+        flood = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(20)]
+        try:
+            slow = socket.create_connection(("127.0.0.1", server.port))
+            slow.sendall(b"GET /?token=")
+            deadline = time.monotonic() + WAIT_S
+            while server.gate.evicted < 13 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert len(server.gate.open) <= 8 and server.gate.evicted == 13
+            with urllib.request.urlopen(server.url, timeout=WAIT_S) as response:     # a page still gets in
+                assert response.status == 200 and response.headers["Server"] == "nonholo"
+            started = time.monotonic()
+            assert closed_by_peer(slow, 3.0) and time.monotonic() - started < 2.5
+            assert all(closed_by_peer(sock, 3.0) for sock in flood)
+            assert server.gate.expired >= 7 and not server.gate.unproven
+        finally:
+            for sock in flood + [slow]:
+                sock.close()
+
+
+def test_a_malformed_request_is_refused_and_the_terminal_stays_quiet(replay_server, capfd):
+    """aiohttp logs a malformed request's traceback; a program without logging set up (the
+    nonholo command) would print it (logging's last resort): nothing reaches the root logger."""
+    records = []
+    collect = logging.Handler()
+    collect.emit = records.append
+    logging.getLogger().addHandler(collect)
+    try:
+        with socket.create_connection(("127.0.0.1", replay_server.port), timeout=WAIT_S) as sock:
+            sock.sendall(b"GET /?token=" + replay_server.token.encode() + b" HTTP/1.1\r\nX-Long: " + b"a" * 10_000
+                         + b"\r\n\r\n")
+            assert sock.recv(4096).split(b"\r\n")[0] in (b"HTTP/1.0 400 Bad Request", b"HTTP/1.1 400 Bad Request")
+        assert get(replay_server.url)[0] == 200
+    finally:
+        logging.getLogger().removeHandler(collect)
+    assert records == []
+    out, err = capfd.readouterr()
+    assert err == "" and out == ""
 
 
 def test_live_feed_is_latest_wins():

@@ -11,11 +11,20 @@ only answers GET: the page, its two assets, ``/data`` (the page's JSON: a replay
 fleet's robots, links and reference) and ``/live`` (a WebSocket of the newest snapshots, at
 most ``RATE_HZ`` a second, at most ``MAX_CLIENTS`` at once; a client that does not take a
 message within ``SEND_TIMEOUT_S`` is dropped).
+
+Connections are bounded whoever opens them: at most ``MAX_CONNECTIONS`` at once, and one that
+has not made a request with the token within ``REQUEST_DEADLINE_S`` of connecting is closed
+(slow or silent clients, floods). When all are taken, a new connection closes one of those not
+yet proven, chosen at random, so that a flood cannot keep a page out; with none to close, it
+is refused. A proven connection idle for ``KEEPALIVE_S`` is closed. Malformed requests get
+aiohttp's 400 answer and nothing on the terminal; responses name no server software.
 """
 from __future__ import annotations
 
 import asyncio
 import json
+import logging
+import random
 import secrets
 import socket
 import threading
@@ -26,6 +35,9 @@ from nonholo.view import require
 RATE_HZ = 20.0
 MAX_CLIENTS = 16
 SEND_TIMEOUT_S = 2.0
+MAX_CONNECTIONS = 64
+REQUEST_DEADLINE_S = 5.0
+KEEPALIVE_S = 15.0
 START_TIMEOUT_S = 10.0
 STOP_TIMEOUT_S = 5.0
 ASSETS = {"/": ("index.html", "text/html"), "/view.js": ("view.js", "text/javascript"),
@@ -38,6 +50,100 @@ HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Con
 
 def asset(name: str) -> bytes:
     return resources.files("nonholo.view").joinpath("static", name).read_bytes()
+
+
+def quiet_logger() -> logging.Logger:
+    """aiohttp's request-error log for the page server: dropped (a malformed request from
+    anyone must not write tracebacks to the terminal)."""
+    logger = logging.getLogger("nonholo.view.http")
+    logger.propagate = False
+    if not logger.handlers:
+        logger.addHandler(logging.NullHandler())
+    return logger
+
+
+class ConnectionGate:
+    """Every connection to the page server, bounded (see the module docstring): wraps the
+    HTTP protocol factory ``factory``; ``prove(transport)`` marks a connection that made a
+    request with the token."""
+
+    def __init__(self, factory, limit: int, deadline_s: float) -> None:
+        self.factory, self.limit, self.deadline_s = factory, limit, deadline_s
+        self.open: dict = {}        # transport -> its GatedConnection
+        self.unproven: dict = {}    # transport -> None: not yet a request with the token
+        self.refused = self.evicted = self.expired = 0
+
+    def __call__(self) -> "GatedConnection":
+        return GatedConnection(self)
+
+    def admit(self, transport) -> bool:
+        if len(self.open) >= self.limit:
+            if not self.unproven:
+                self.refused += 1
+                return False
+            self.evicted += 1
+            self.close(random.choice(list(self.unproven)))
+        return True
+
+    def prove(self, transport) -> None:
+        if transport in self.unproven:
+            del self.unproven[transport]
+            connection = self.open.get(transport)
+            if connection is not None and connection.timer is not None:
+                connection.timer.cancel()
+
+    def close(self, transport) -> None:
+        self.open.pop(transport, None)
+        self.unproven.pop(transport, None)
+        transport.abort()
+
+    def expire(self, transport) -> None:
+        if transport in self.unproven:
+            self.expired += 1
+            self.close(transport)
+
+
+class GatedConnection(asyncio.Protocol):
+    """One connection through a ``ConnectionGate``: aiohttp's protocol inside, counted, on a
+    deadline until proven."""
+
+    def __init__(self, gate: ConnectionGate) -> None:
+        self.gate, self.inner, self.timer, self.transport = gate, None, None, None
+
+    def connection_made(self, transport) -> None:
+        if not self.gate.admit(transport):
+            transport.abort()
+            return
+        self.transport = transport
+        self.gate.open[transport] = self
+        self.gate.unproven[transport] = None
+        self.timer = asyncio.get_running_loop().call_later(self.gate.deadline_s, self.gate.expire, transport)
+        self.inner = self.gate.factory()
+        self.inner.connection_made(transport)
+
+    def connection_lost(self, exc) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+        if self.transport is not None:
+            self.gate.open.pop(self.transport, None)
+            self.gate.unproven.pop(self.transport, None)
+        if self.inner is not None:
+            self.inner.connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        if self.inner is not None:
+            self.inner.data_received(data)
+
+    def eof_received(self):
+        return self.inner.eof_received() if self.inner is not None else None
+
+    def pause_writing(self) -> None:
+        if self.inner is not None:
+            self.inner.pause_writing()
+
+    def resume_writing(self) -> None:
+        if self.inner is not None:
+            self.inner.resume_writing()
 
 
 class ViewServer:
@@ -56,6 +162,7 @@ class ViewServer:
         self._thread: threading.Thread | None = None
         self._runner = None
         self._clients: set = set()
+        self.gate: ConnectionGate | None = None
         self._started = threading.Event()
         self._error: BaseException | None = None
         self.refused = 0
@@ -118,21 +225,30 @@ class ViewServer:
         async def guard(request, handler):
             return await self._guard(request, handler)
 
+        async def anonymous(request, response):
+            response.headers["Server"] = "nonholo"
+
         app = web.Application(middlewares=[guard], client_max_size=1024)
+        app.on_response_prepare.append(anonymous)
         for path in ASSETS:
             app.router.add_get(path, self._asset)
         app.router.add_get("/data", self._data)
         app.router.add_get("/live", self._live)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0,
+                                     keepalive_timeout=KEEPALIVE_S, logger=quiet_logger())
         await self._runner.setup()
-        await web.SockSite(self._runner, sock).start()
+        self.gate = ConnectionGate(self._runner.server, MAX_CONNECTIONS, REQUEST_DEADLINE_S)
+        server = await asyncio.get_running_loop().create_server(self.gate, sock=sock)
         self._started.set()
         try:
             await self._stopping.wait()
         finally:
+            server.close()
             for ws in list(self._clients):
                 await ws.close()
             await self._runner.cleanup()
+            for transport in list(self.gate.open):
+                self.gate.close(transport)
 
     # ------------------------------------------------------------------ handlers
     async def _guard(self, request, handler):
@@ -142,6 +258,8 @@ class ViewServer:
         if not secrets.compare_digest(given.encode(), self.token.encode()) or request.method not in ("GET", "HEAD"):
             self.refused += 1
             return web.Response(status=403, text="forbidden")
+        if self.gate is not None and request.transport is not None:
+            self.gate.prove(request.transport)
         response = await handler(request)
         if not getattr(response, "prepared", False):
             response.headers.update(HEADERS)
