@@ -61,10 +61,12 @@ class Scene:
         self.closers.append(client.close)
         return client
 
-    async def raw(self, rcvbuf: int | None = None):
+    async def raw(self, rcvbuf: int | None = None, source: str | None = None):
         sock = socket.socket()
         if rcvbuf is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        if source is not None:   # another loopback address as the connection's source
+            sock.bind((source, 0))
         sock.setblocking(False)
         try:
             await asyncio.get_running_loop().sock_connect(sock, ("127.0.0.1", self.port))
@@ -248,7 +250,7 @@ def test_flood_of_silent_connections_is_capped_and_a_good_peer_still_gets_in():
             assert stats["pending"] <= FAST.max_pending
             assert stats["evicted_pending"] >= 40 - FAST.max_pending
             start = time.monotonic()
-            await scene.client("f2", 2)  # makes room by closing the oldest silent one
+            await scene.client("f2", 2)  # makes room by closing a silent one
             assert time.monotonic() - start < 0.4
             await scene.hub.send(b"tick")
             assert await asyncio.wait_for(f1.recv(), 2.0) == ("leader", b"tick")
@@ -256,6 +258,24 @@ def test_flood_of_silent_connections_is_capped_and_a_good_peer_still_gets_in():
             await eventually(lambda: scene.hub.stats()["pending"] == 0, FAST.hello_timeout + 1.0)
             assert scene.hub.peers == ["f1", "f2"]
             del flood
+    run(scenario())
+
+
+def test_a_flood_from_one_address_evicts_only_its_own_connections():
+    """A peer's hello in flight from another address is never the one closed for the flood's
+    new connections (the hub evicts among the connections of the address holding the most)."""
+    async def scenario():
+        async with Scene(dataclasses.replace(FAST, hello_timeout=2.0)) as scene:
+            reader, peer = await scene.raw()                     # 127.0.0.1: a slow hello, say
+            await read_frame(reader, 1024)                       # the hub's challenge
+            flood = [await scene.raw(source="127.0.0.2") for _ in range(3 * FAST.max_pending)]
+            await eventually(lambda: scene.hub.stats()["connections"] >= 1 + 3 * FAST.max_pending)
+            stats = scene.hub.stats()
+            assert stats["pending"] <= FAST.max_pending
+            assert stats["evicted_pending"] == 1 + 3 * FAST.max_pending - FAST.max_pending
+            with pytest.raises(asyncio.TimeoutError):              # the peer's connection: open, silent
+                await asyncio.wait_for(reader.read(1), 0.3)
+            del flood, peer
     run(scenario())
 
 

@@ -9,7 +9,8 @@ Connection life (limits in ``StreamLimits``):
 
 1. The hub sends a challenge and the peer must prove its link key (``hello``) within
    ``hello_timeout``; until then the peer learns nothing, and the hub counts it against
-   ``max_pending`` (when full, the oldest unproven connection is closed to make room).
+   ``max_pending`` (when full, an unproven connection of the source address holding the most
+   is closed to make room, at random).
 2. A proven peer whose name is already connected is refused; the connected one keeps
    its link. At most ``max_peers`` proven peers.
 3. Each end closes a link that brought nothing, not even a keepalive, for
@@ -24,6 +25,7 @@ Connection life (limits in ``StreamLimits``):
 from __future__ import annotations
 
 import asyncio
+import random
 import secrets
 import socket
 import struct
@@ -55,7 +57,7 @@ class StreamLimits:
     keepalive_interval: float = 2.0   # s without sending before a keepalive goes out
     write_timeout: float = 10.0       # s a socket may accept nothing before the link is dropped
     max_peers: int = 32               # proven peers on a hub
-    max_pending: int = 16             # connections still in the hello on a hub
+    max_pending: int = 64             # connections still in the hello on a hub
     send_queue_frames: int = 128      # per peer on a hub; oldest dropped beyond
     send_queue_bytes: int = 1 << 20   # per peer on a hub; oldest dropped beyond
     inbox_frames_per_peer: int = 64   # frames of one peer waiting for recv on a hub
@@ -171,8 +173,8 @@ class StreamClient(Transport):
             writer.transport.abort()
             if isinstance(exc, HelloFailed):
                 raise
-            raise HelloFailed("the hub closed the connection during the hello (wrong key or "
-                              "key id for this name?)") from None
+            raise HelloFailed("the hub closed the connection during the hello (a wrong key or key id "
+                              "for this name, or a hub flooded with connections)") from None
         except BaseException:
             writer.transport.abort()
             raise
@@ -307,6 +309,12 @@ class _Link:
                 "connected_s": round(time.monotonic() - self.connected_at, 3)}
 
 
+def _source(writer: asyncio.StreamWriter) -> str:
+    """A connection's source address (its host, without the port), for eviction."""
+    peer = writer.get_extra_info("peername")
+    return str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+
+
 class StreamServer(InboxTransport):
     """The hub of the star. Accepts connections from an ``asyncio.Server`` (see
     ``transports.tcp.serve_tcp``) or from ``attach_socket``; frames from all peers are
@@ -326,7 +334,7 @@ class StreamServer(InboxTransport):
         self.capabilities = _stream_capabilities(max_frame)
         self.server: asyncio.AbstractServer | None = None
         self._links: dict[str, _Link] = {}
-        self._pending: dict[asyncio.StreamWriter, None] = {}  # insertion order = age
+        self._pending: dict[asyncio.StreamWriter, str] = {}  # connections in the hello: their source address
         self._tasks: set[asyncio.Task] = set()
         self._peers_changed = asyncio.Event()
         self._counts: Counter[str] = Counter()
@@ -375,11 +383,11 @@ class StreamServer(InboxTransport):
             if self._closed:
                 return
             if len(self._pending) >= self.limits.max_pending:
-                oldest = next(iter(self._pending))
-                del self._pending[oldest]
-                oldest.transport.abort()
+                victim = self._pending_victim()
+                del self._pending[victim]
+                victim.transport.abort()
                 self._counts["evicted_pending"] += 1
-            self._pending[writer] = None
+            self._pending[writer] = _source(writer)
             try:
                 link = await self._hello(reader, writer)
             finally:
@@ -397,6 +405,17 @@ class StreamServer(InboxTransport):
                 writer.transport.abort()
             if task is not None:
                 self._tasks.discard(task)
+
+    def _pending_victim(self) -> asyncio.StreamWriter:
+        """The connection still in the hello to close for a new one: one at random among
+        those of the source address holding the most. A flood from one address evicts its
+        own connections, never a peer's from another; from the same address (loopback) a
+        peer's hello in flight is as likely to go as any of the flood's, not certain to as
+        the oldest was (a flood of 16 connections per hello round trip locked peers out)."""
+        counts = Counter(self._pending.values())
+        most = max(counts.values())
+        crowded = {source for source, count in counts.items() if count == most}
+        return random.choice([w for w, source in self._pending.items() if source in crowded])
 
     async def _hello(self, reader: asyncio.StreamReader,
                      writer: asyncio.StreamWriter) -> _Link | None:
