@@ -135,6 +135,37 @@ def test_forged_and_replayed_frames_are_rejected_without_effect(tmp_path):
     assert attacked["f1"].channel.rejected["ForgedMessage"] > 0
 
 
+def test_a_state_sealed_for_a_sibling_is_rejected_without_effect():
+    """The leader's frames to f1, delivered to f2 too (before f2's own): sealed by the leader
+    and fresh, but addressed to f1; f2 rejects every one and runs as without them."""
+    from nonholo.fleet.bench import star_text
+    from nonholo.sim.files import parse_scenario
+
+    scenario = parse_scenario(star_text(2).replace("duration = 2.0", "duration = 1.0\ncontrol_period = 0.02"))
+    config = NetworkConfig(transport="inproc")
+    setups = robot_setups(scenario)
+
+    def run(attack):
+        network = InProcNetwork()
+        programs = inproc_programs(scenario, setups, config, "lockstep", 10.0, network, fleet_keys(scenario.names))
+        if attack:
+            deliver = network.deliver
+
+            def hostile(sender, frame, to):
+                if sender == "leader" and to == "f1":
+                    deliver("leader", frame, "f2")          # misaddressed: a copy to the sibling first
+                deliver(sender, frame, to)
+            network.deliver = hostile
+        asyncio.run(run_programs(programs, "lockstep", config))
+        return {p.setup.name: p for p in programs}
+
+    clean, attacked = run(False), run(True)
+    for name in clean:
+        assert np.array_equal(clean[name].states, attacked[name].states), name
+    assert attacked["f2"].tally.rejected["leader"] == attacked["leader"].tally.sent["f1"] > 0
+    assert attacked["f1"].tally.rejected["leader"] == 0
+
+
 def test_link_health_figure_and_network_table(tmp_path):
     from nonholo.fleet.report import format_network, plot_link_health
 

@@ -176,7 +176,9 @@ class RobotProgram:
             return
         sender = message.sender.name
         known = sender in self.setup.parents or sender in self.setup.children
-        if not known or sender != peer:
+        # a frame sealed for another robot (a sibling's state replayed here) is not ours
+        addressed = any(receiver.name == self.setup.name for receiver in message.receivers or ())
+        if not known or sender != peer or not addressed:
             self.tally.rejected[peer] += 1
             return
         try:
