@@ -121,6 +121,20 @@ def test_divergence_is_a_counted_failure_not_an_abort():
         nh.simulate(nh.parse_scenario(UNSTABLE.replace("name = \"r\"", "name = \"r\"\nstart = [3, 0, 0]")))
 
 
+
+def test_a_batch_that_diverges_names_its_members_and_report_marks_them():
+    from nonholo.sim.simulator import diverged
+
+    stable = nh.parse_scenario(UNSTABLE)
+    members = [nh.parse_scenario(UNSTABLE.replace('name = "r"', f'name = "r"\nstart = [{x}, 0, 0]'))
+               for x in (0.0, 3.0, 0.0, 3.0)]
+    with pytest.raises(nh.SimulationError, match=r"'r' diverged in 2 member\(s\) of the batch \(the first: member 1;"):
+        nh.simulate(members, record=False)
+    result = nh.simulate(members, record=False, on_divergence="report")
+    assert diverged(result.stats).any(axis=0).tolist() == [False, True, False, True]
+    assert result.metrics.error_mean[0, 0] == pytest.approx(nh.simulate(stable, record=False).metrics.error_mean[0])
+
+
 WEDGE = """
 name = "wedge"
 [simulation]

@@ -708,13 +708,18 @@ def diverged(stats: np.ndarray) -> np.ndarray:
 
 
 def _check_diverged(group: Group, stats: np.ndarray) -> None:
-    finite = ~diverged(stats).any(axis=1)
+    bad = diverged(stats)   # (robots of the graph, copies)
+    finite = ~bad.any(axis=1)
     if not finite.all():
         names = [robot.name for robot, ok in zip(group.robots, finite) if not ok]
         shown = ", ".join(repr(name) for name in names[:5]) + (" …" if len(names) > 5 else "")
+        members = sorted({member for (member, _), failed in zip(group.copies, bad.any(axis=0)) if failed})
+        batch = "" if len({member for member, _ in group.copies}) == 1 else \
+            f" in {len(members)} member(s) of the batch (the first: member {members[0]}; on_divergence=\"report\" " \
+            "completes the batch and marks them)"
         raise SimulationError(
-            f"the simulation of robot(s) {shown} diverged (state non-finite or beyond 1e9 m): reduce dt, set more substeps or "
-            "check the gains, actuator limits and the formation's geometry")
+            f"the simulation of robot(s) {shown} diverged{batch} (state non-finite or beyond 1e9 m): reduce dt, set more "
+            "substeps or check the gains, actuator limits and the formation's geometry")
 
 
 def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bool, grid: np.ndarray):
