@@ -99,4 +99,7 @@ def test_fleet_cli_json(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["network"]["transport"] == "inproc" and "leader" in summary["robots"]
     path.write_text(path.read_text().replace("control_period = 0.02\n", ""))
+    capsys.readouterr()
     assert main(["fleet", str(path), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "--control-period S" in err and str(path) in err

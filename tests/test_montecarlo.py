@@ -264,3 +264,9 @@ def test_link_model_variation_needs_sampled_data_and_its_range():
         run_montecarlo(NETWORKED, ["network.loss=normal(0.1, 0.5)"], 50)
     with pytest.raises(NonholoInputError, match="'bandwidth' is not a number of the link model"):
         run_montecarlo(NETWORKED, ["network.bandwidth=uniform(0, 1)"], 4)
+
+
+def test_a_draw_outside_a_gain_s_rules_is_one_line_naming_the_option_and_sample():
+    with pytest.raises(NonholoInputError, match=r"^--vary leader\.gains\.kp: sample \d+ draws -[\d.]+: gain 'kp1' "
+                                                r"of dynamic-feedback must be > 0"):
+        run_montecarlo(LINE, ["leader.gains.kp=normal(1, 5)"], 20, progress=False)

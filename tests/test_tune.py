@@ -77,3 +77,28 @@ def test_robust_over_starts_and_cli(tmp_path, capsys):
     assert main(["tune", str(path), "--gains", "kp,zz"]) == 2
     assert "zz" in capsys.readouterr().err
     assert main(["tune", str(path), "--gains", "kp", "--bounds", "kp=3:1"]) == 2
+
+
+def test_bounds_outside_a_gain_s_rules_are_one_line_exit_2(tmp_path, capsys):
+    path = tmp_path / "line.toml"
+    path.write_text(LINE)
+    assert main(["tune", str(path), "--gains", "kp", "--bounds", "kp=-1:1", "--steps", "100", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("nonholo tune: --bounds kp=-1:1: gain 'kp1' of dynamic-feedback must be > 0, got -1")
+    assert len(err.splitlines()) == 1
+
+
+def test_the_table_shows_every_tuned_gain_whole(tmp_path, capsys):
+    from nonholo.cli.tune import describe
+
+    path = tmp_path / "line.toml"
+    path.write_text(LINE.replace("dynamic-feedback", "kanayama").replace("{ kp = 1.0, kd = 0.7, xi0 = 0.5 }",
+                                                                         "{ kx = 10.0, ky = 0.0064, ktheta = 0.16 }"))
+    result = run_tune(path.read_text(), ["kx", "ky", "ktheta"], steps=200, maxiter=1, popsize=2, progress=False)
+    text = describe(result)
+    for name, value in {**result.gains, **result.baseline}.items():
+        assert f"{name} = {value:.4g}" in text
+    assert max(map(len, text.splitlines())) <= 100
+    result.gains = {f"a_long_gain_name_{i}": 1.0 + i for i in range(4)}   # too long for a column: own lines
+    text = describe(result)
+    assert "optimum gains: a_long_gain_name_0 = 1" in text and max(map(len, text.splitlines())) <= 100

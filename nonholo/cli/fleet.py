@@ -61,6 +61,9 @@ def run_and_report(args: argparse.Namespace, viewing) -> int:
         source = examples.resolve(args.scenario)
         overrides = simulation_overrides(args)
         scenario, config = load_fleet(source, overrides)
+        if scenario.hold_every == 0:
+            raise NonholoInputError(f"{args.scenario}: a fleet needs sampled-data control: add --control-period S "
+                                    "(a multiple of dt, e.g. 0.02) or set [simulation] control_period")
         config = viewing.network(config, scenario.names)      # --keys, --observe
         transport = args.transport or config.transport
         viewing.start()

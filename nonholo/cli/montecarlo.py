@@ -22,8 +22,8 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "montecarlo", help="draw a scenario's numbers from distributions; metric distributions and failure rates",
         description="Simulate SAMPLES draws of some numbers of a scenario (statistics only, in batches) and report "
-                    "the distribution of every metric (mean with a 95%% interval, quantiles), failure probabilities "
-                    "with 95%% intervals (diverged, singular, saturated, collision closer than 2d) and the worst "
+                    "the distribution of every metric (mean with a 95% interval, quantiles), failure probabilities "
+                    "with 95% intervals (diverged, singular, saturated, collision closer than 2d) and the worst "
                     "samples. FIELD: ROBOT.start.x|y|theta, ROBOT.gains.NAME, ROBOT.goal.x|y|theta, ROBOT.l, "
                     "ROBOT.phi, ROBOT.l1, ROBOT.l2, ROBOT.d, ROBOT.v_max, ROBOT.omega_max. DIST: normal(MU, SIGMA) "
                     "or uniform(A, B), absolute values.",

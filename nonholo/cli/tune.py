@@ -87,15 +87,21 @@ def handle(args: argparse.Namespace) -> int:
 
 
 def describe(result) -> str:
-    """The optimum beside the Table 5.1 gains (lines of at most 100 columns)."""
+    """The optimum beside the Table 5.1 gains (lines of at most 100 columns; gains too long for
+    their column go on lines of their own, never cut)."""
+    rows = [("optimum", result.gains, result.objective, result.metrics),
+            ("Table 5.1", result.baseline, result.baseline_objective, result.baseline_metrics)]
+    shown = [", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) for _, gains, _, _ in rows]
+    width = max(len("gains"), *map(len, shown)) + 2
+    inline = 14 + width + 42 <= 100
     lines = [f"{result.scenario}, robot {result.robot} ({result.controller}): objective {result.objective_text}, "
              f"{result.generations} generations, {result.evaluations} evaluations"
              + (f", mean over {result.starts} starts" if result.starts > 1 else ""),
-             f"{'':<14}{'gains':<34}{'objective':>12}{'err mean':>10}{'err rms':>10}{'effort':>10}"]
-    for label, gains, value, metrics in (("optimum", result.gains, result.objective, result.metrics),
-                                         ("Table 5.1", result.baseline, result.baseline_objective,
-                                          result.baseline_metrics)):
-        shown = ", ".join(f"{k} = {v:.4g}" for k, v in gains.items())
-        lines.append(f"{label:<14}{shown[:33]:<34}{value:>12.5g}{metrics['error_mean']:>10.4g}"
-                     f"{metrics['error_rms']:>10.4g}{metrics['effort']:>10.4g}")
+             f"{'':<14}{'gains' if inline else '':<{width if inline else 0}}{'objective':>12}{'err mean':>10}"
+             f"{'err rms':>10}{'effort':>10}"]
+    for (label, _, value, metrics), gains in zip(rows, shown):
+        lines.append(f"{label:<14}{gains if inline else '':<{width if inline else 0}}{value:>12.5g}"
+                     f"{metrics['error_mean']:>10.4g}{metrics['error_rms']:>10.4g}{metrics['effort']:>10.4g}")
+    if not inline:
+        lines += [f"{label} gains: {gains}" for (label, _, _, _), gains in zip(rows, shown)]
     return "\n".join(wrap(line) for line in lines)

@@ -467,6 +467,14 @@ def run_montecarlo(text: str, variations_text: Sequence[str], samples: int, seed
                 raise NonholoInputError(f"--vary {variation.field}: {outside} of {samples} draws fall outside "
                                         f"[{low:g}, {high:g}{')' if variation.path == 'loss' else ']'}: choose a "
                                         "distribution within the range (e.g. uniform)")
+    means = [_mean(v.distribution) for v in variations]
+    for k, variation in enumerate(variations):   # the extreme draws against the field's rules, one line
+        for i in (int(np.argmin(values[:, k])), int(np.argmax(values[:, k]))):
+            try:
+                sample_scenario(part, fields, means[:k] + [values[i, k]] + means[k + 1:])
+            except NonholoInputError as exc:
+                raise NonholoInputError(f"--vary {variation.field}: sample {i} draws {values[i, k]:g}: {exc}; "
+                                        "choose a distribution within the field's range (e.g. uniform)") from None
     if on_start is not None:
         on_start()
     robots = [r.name for r in part.robots]

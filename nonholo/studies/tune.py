@@ -235,6 +235,12 @@ def run_tune(text: str, gains: Sequence[str], bounds: Sequence[str] = (), object
         raise NonholoInputError("--start: a tuned gain cannot also be varied")
     start_values = draw(variations, start_samples, seed) if variations else np.zeros((1, 0))
     part = varied_part(scenario, [target.name] + [v.robot for v in variations])
+    for bound, path in zip(box, paths):   # both ends must be gains the law takes (its rules, one line)
+        for value in (bound.low, bound.high):
+            try:
+                sample_scenario(part, [(target.name, path)], [value])
+            except NonholoInputError as exc:
+                raise NonholoInputError(f"--bounds {bound.name}={bound.low:g}:{bound.high:g}: {exc}") from None
     fields = [(target.name, p) for p in paths] + [(v.robot, v.path) for v in variations]
     sample_scenario(part, fields, [*baseline.values(), *(start_values[0] if variations else [])])
     n_starts = start_values.shape[0]
@@ -243,6 +249,7 @@ def run_tune(text: str, gains: Sequence[str], bounds: Sequence[str] = (), object
                     "objective": goal.describe()}
     evaluations = 0
     history: list[float] = []
+    refused: list[NonholoInputError] = []   # a gain inside the bounds that the law refuses
 
     def batch(points: np.ndarray, client) -> np.ndarray:
         """Objective of each row of ``points`` (members, gains), averaged over the starts."""
@@ -251,9 +258,13 @@ def run_tune(text: str, gains: Sequence[str], bounds: Sequence[str] = (), object
         bounds_ = distributed.chunk_bounds(rows.shape[0], work)
         out = np.empty(rows.shape[0])
         payloads = [{**payload_base, "values": rows[a:b]} for a, b in bounds_]
-        for index, values in distributed.run_chunks(evaluate_chunk, payloads, client):
-            a, b = bounds_[index]
-            out[a:b] = values
+        try:
+            for index, values in distributed.run_chunks(evaluate_chunk, payloads, client):
+                a, b = bounds_[index]
+                out[a:b] = values
+        except NonholoInputError as exc:
+            refused.append(exc)
+            raise
         evaluations += points.shape[0]
         return out.reshape(points.shape[0], n_starts).mean(axis=1)
 
@@ -263,9 +274,15 @@ def run_tune(text: str, gains: Sequence[str], bounds: Sequence[str] = (), object
             history.append(float(intermediate_result.fun))
             bar.update(1)
 
-        solution = differential_evolution(lambda x: batch(np.atleast_2d(x.T), client), [(b.low, b.high) for b in box],
-                                          vectorized=True, updating="deferred", seed=seed, maxiter=maxiter,
-                                          popsize=popsize, tol=tol, polish=False, callback=callback)
+        try:
+            solution = differential_evolution(lambda x: batch(np.atleast_2d(x.T), client),
+                                              [(b.low, b.high) for b in box], vectorized=True, updating="deferred",
+                                              seed=seed, maxiter=maxiter, popsize=popsize, tol=tol, polish=False,
+                                              callback=callback)
+        except Exception:
+            if refused:   # scipy wraps what the objective raises
+                raise NonholoInputError(f"--bounds: {refused[0]}") from None
+            raise
         best = {g: float(v) for g, v in zip(gains, np.atleast_1d(solution.x))}
         both = batch(np.array([list(best.values()), list(baseline.values())]), client)
         metrics = _metrics(part, fields, [list(best.values()), list(baseline.values())], start_values, target.name)
