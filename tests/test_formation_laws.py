@@ -169,6 +169,21 @@ def test_ramp_feeds_the_target_rate_forward():
     assert l[-1] == pytest.approx(3.0) and phi[-1] == pytest.approx(math.pi / 2)
 
 
+def test_a_ramp_settles_after_its_ramp():
+    """Settling is the time until the changed output stays within 2 % of the change around
+    its new target: a ramp fed forward tracks its moving target exactly, and settles when
+    its target arrives there, within a sample (its error alone would say 0 s)."""
+    change = Change(2.0, {"phi": math.pi / 2}, mode="ramp", duration=5.0)
+    follower = separation_bearing("f1", "leader", 2.0, math.pi / 3, changes=(change,))
+    result = simulate_formation(Formation([eight_leader(), follower], references.eight(), duration=10.0))
+    settling = result.follower_metrics("f1")["settling"][0]
+    from nonholo.sim.targets import target_table
+    target = target_table(follower, result.t)[:, 1]      # the ramp's profile (smooth: not linear)
+    inside = np.abs(target - math.pi / 2) <= 0.02 * (math.pi / 2 - math.pi / 3)
+    arrives = result.t[np.argmax(inside & (result.t > 2.0))] - 2.0
+    assert 4.0 < arrives < 5.0 and settling["phi_settling_time"] == pytest.approx(arrives, abs=0.0101)
+
+
 def triangle(wedge=False, reference=None, duration=None):
     if wedge:
         r2 = separation_bearing("R2", "leader", math.sqrt(13), math.atan2(-2 * math.sqrt(3), 1),

@@ -12,7 +12,7 @@ from nonholo.control.posture import HEADING_CONTROLLED
 from nonholo.references.feedforward import REF_COLUMNS
 from nonholo.sim import kernel as k
 from nonholo.sim.scenario import Follower, Robot, Scenario
-from nonholo.sim.targets import target_segments
+from nonholo.sim.targets import target_segments, target_table
 
 TRAJECTORY_FIELDS = {"x": k.REC_X, "y": k.REC_Y, "theta": k.REC_THETA, "xi": k.REC_XI, "v": k.REC_V,
                      "omega": k.REC_OMEGA}
@@ -276,6 +276,7 @@ class SimulationResult:
 
     def _settling(self, follower: Follower, i: int, member: int) -> list[dict]:
         errors = self.output_errors(i, member)
+        targets = target_table(follower, self.t)   # z_d(t) less its constant branch offset
         entries = []
         segments = target_segments(follower)
         for change in follower.changes:
@@ -288,7 +289,10 @@ class SimulationResult:
                     entry[f"{name}_disturbance"] = float(np.abs(errors[output][self.t > change.at]).max())
                 else:
                     band = SETTLING_BAND * abs(segment[2] - segment[1])
-                    entry[f"{name}_settling_time"] = settling_time(self.t, errors[output], change.at, band, until)
+                    # the output against its new target, z − z_d,end = (z_d(t) − z_d,end) − (z_d − z): a
+                    # step's error, and a ramp's distance to where it goes (it settles after its ramp)
+                    away = targets[:, output] - segment[2] - errors[output]
+                    entry[f"{name}_settling_time"] = settling_time(self.t, away, change.at, band, until)
                     entry[f"{name}_target"] = segment[2]
             entries.append(entry)
         return entries
