@@ -94,7 +94,10 @@ BAD = [
     (GOOD.replace('kind = "expression"', 'kind = "spiral"'), "reference.kind: unknown value 'spiral'"),
     (GOOD.replace("kp = 1.0", "kp = -1.0"), "robots[0].gains: gain 'kp1' of dynamic-feedback must be > 0, got -1"),
     (GOOD.replace("[simulation]", "[simulation]\nspeed = 3"), "simulation.speed: unknown field"),
-    (GOOD + "\n[[robots]]\nname = \"leader\"\n", "robot names must be unique"),
+    (GOOD + "\n[[robots]]\nname = \"leader\"\n", "robots[1].name: 'leader' is already the name of robots[0]: robot "
+                                                   "names must be unique"),
+    (GOOD.replace("start = [0.0, 0.5, 0.0]", "start = [1e300, 0.5, 0.0]"),
+     "robots[0].start: x and y must be within ±1e+07 m and theta within ±1e+06 rad"),
     ("[reference\n", "not valid TOML"),
     (GOOD.replace('controller = "dynamic-feedback"', 'controller = "kanayama"').replace("gains = { kp = 1.0, kd = 0.7 }", "")
          .replace('x = "6*sin(t/15 + 0.3) + 0.2*t"', 'x = "(t-3)^3"').replace('y = "4*sin(t/10)"', 'y = "(t-3)^2"'),

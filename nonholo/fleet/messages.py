@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 from nonholo.comm.errors import ContentError
 from nonholo.comm.message import ACLMessage, AgentID
+from nonholo.sim.scenario import MAX_POSITION_M
 
 ONTOLOGY = "leader-follower-v1"
 LANGUAGE = "json"
 PROTOCOL = "fipa-subscribe"
-MAX_POSITION_M = 1.0e7
 MAX_INSTANT = 2**53
 
 

@@ -339,6 +339,10 @@ class _Reader:
         for i, robot in enumerate(robots_data):
             robot = self.table(robot, f"robots[{i}]")
             robots.append(self.follower(robot, i) if "formation" in robot else self.robot(robot, i))
+            first = next(j for j, other in enumerate(robots) if other.name == robots[-1].name)
+            if first < i:
+                self.fail(f"robots[{i}].name", f"{robots[-1].name!r} is already the name of robots[{first}]: "
+                                               "robot names must be unique")
         if reference is None and any(isinstance(r, Robot) and not r.posture for r in robots):
             self.fail("reference", "missing table [reference] (a robot tracks it)")
         kwargs = {}

@@ -30,6 +30,8 @@ from nonholo.sim.targets import target_segments
 
 METHODS = ("rk4", "solve_ivp")
 MAX_STEPS = 1e8
+MAX_POSITION_M = 1.0e7   # |x|, |y| of a start or goal (and of a state a robot program sends)
+MAX_ANGLE_RAD = 1.0e6    # |θ| of a start or goal
 SEPARATION_BEARING = "separation-bearing"
 SEPARATION_SEPARATION = "separation-separation"
 FORMATION_LAWS = (SEPARATION_BEARING, SEPARATION_SEPARATION)
@@ -50,7 +52,11 @@ def _pose(value, robot: str, name: str) -> tuple[float, float, float]:
         pose = ()
     if len(pose) != 3 or not all(is_real(s) for s in pose):
         raise FormationError(robot, name, f"must be three finite numbers [x, y, theta], got {value!r}"[:200])
-    return tuple(float(s) for s in pose)
+    x, y, theta = (float(s) for s in pose)
+    if max(abs(x), abs(y)) > MAX_POSITION_M or abs(theta) > MAX_ANGLE_RAD:
+        raise FormationError(robot, name, f"x and y must be within ±{MAX_POSITION_M:g} m and theta within "
+                                          f"±{MAX_ANGLE_RAD:g} rad, got {value!r}"[:200])
+    return x, y, theta
 
 
 def _limits(robot) -> None:
