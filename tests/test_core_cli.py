@@ -114,6 +114,17 @@ def test_bad_scenarios_get_one_line_errors_and_exit_2(tmp_path, capsys, text, me
     assert "Traceback" not in err
 
 
+@pytest.mark.parametrize("option, message", [
+    (["--plot", "p.txt"], "--plot p.txt: unknown image format 'txt' (name it .png, .pdf, .svg"),
+    (["--plot", "p"], "--plot p: no format"),
+    (["--animate", "a.png"], "--animate a.png: name it .gif (or .mp4, with ffmpeg)")])
+def test_an_output_name_of_no_known_format_is_refused_before_the_run(tmp_path, capsys, option, message):
+    assert main(["run", "test2-line", "--quiet", "--json", *[str(tmp_path / o) if "." in o or o == "p" else o
+                                                              for o in option]]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message.split(": ", 1)[1] in err and "Traceback" not in err
+
+
 def test_missing_file_and_help():
     code, _, err = run_cli("run", "no-such-file.toml")
     assert code == 2 and "no-such-file.toml: cannot read" in err and "Traceback" not in err

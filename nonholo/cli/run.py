@@ -59,6 +59,7 @@ def handle(args: argparse.Namespace) -> int:
 
         if args.every < 1:
             raise NonholoInputError(f"--every must be a positive integer, got {args.every}")
+        check_output_names(args.plot, args.animate)
         if args.record:   # an optional dependency: say so before the run, not after it
             from nonholo.view import require
 
@@ -100,6 +101,31 @@ def handle(args: argparse.Namespace) -> int:
     else:
         print(format_summary(summary))
     return EXIT_OK
+
+
+def check_output_names(plot: str | None, animate: str | None) -> None:
+    """Before the run: a figure's format from its name (matplotlib's), an animation .gif or
+    .mp4 (ffmpeg installed); NonholoInputError naming the option."""
+    from nonholo.errors import NonholoInputError
+
+    if plot:
+        from matplotlib.figure import Figure
+
+        formats = Figure().canvas.get_supported_filetypes()
+        suffix = Path(plot).suffix.lstrip(".").lower()
+        if suffix not in formats:
+            raise NonholoInputError(f"--plot {plot}: {'unknown image format ' + repr(suffix) if suffix else 'no format'}"
+                                    " (name it .png, .pdf, .svg or another of matplotlib's formats)")
+    if animate:
+        suffix = Path(animate).suffix.lower()
+        if suffix not in (".gif", ".mp4"):
+            raise NonholoInputError(f"--animate {animate}: name it .gif (or .mp4, with ffmpeg)")
+        if suffix == ".mp4":
+            from matplotlib.animation import FFMpegWriter
+
+            if not FFMpegWriter.isAvailable():
+                raise NonholoInputError(f"--animate {animate}: MP4 needs ffmpeg, which is not installed: "
+                                        "write a .gif instead")
 
 
 def write_outputs(result, summary: dict, out: Path, every: int = 1, progress: bool = False) -> list[Path]:
