@@ -103,3 +103,16 @@ def test_fleet_cli_json(tmp_path, capsys):
     assert main(["fleet", str(path), "--json"]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "--control-period S" in err and str(path) in err
+
+
+def test_zenoh_without_its_module_is_one_line_before_any_robot_starts(monkeypatch, capsys):
+    import importlib.util
+
+    from nonholo.cli import main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *args: None if name == "zenoh" else real(name, *args))
+    assert main(["fleet", "formation-chain", "--control-period", "0.02", "--transport", "zenoh", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == "nonholo fleet: the zenoh transport needs the Python module 'zenoh': " \
+                  "python3 -m pip install 'nonholo[zenoh]'\n"

@@ -10,6 +10,7 @@ trajectories and held commands by the kernel's statistics code, plus a ``network
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -76,6 +77,9 @@ def run_fleet(scenario: Scenario, transport: str = "tcp", mode: str = "lockstep"
     if mode not in MODES:
         raise NonholoInputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     check_observe(observe, transport)
+    if transport == "zenoh" and importlib.util.find_spec("zenoh") is None:   # before 8 robots fail with it
+        raise NonholoInputError("the zenoh transport needs the Python module 'zenoh': "
+                                "python3 -m pip install 'nonholo[zenoh]'")
     if config is None:   # the scenario's own link model (Scenario.network), if any
         links = scenario.network or LinkSettings()
         config = NetworkConfig(transport=transport, seed=links.seed, watchdog=links.watchdog, default=links.default,
