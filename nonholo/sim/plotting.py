@@ -124,8 +124,9 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
             d = formation.robots[child].d
             px, py = x[child, k] + d * np.cos(theta[child, k]), y[child, k] + d * np.sin(theta[child, k])
             ax_path.plot([x[parent, k], px], [y[parent, k], py], color="0.4", lw=0.7)
-    ax_path.set(xlabel="x (m)", ylabel="y (m)", title="Paths (markers: snapshots; grey: leader axle → castor point)",
-                aspect="equal")
+    ax_path.set(xlabel="x (m)", ylabel="y (m)", title="Paths (markers: snapshots; grey: leader axle → castor point)"
+                if formation.followers else "Paths (markers: snapshots)")
+    ax_path.set_aspect("equal", adjustable="datalim")   # the panel keeps its size (a straight path: not a strip)
     ax_err.set(xlabel="time (s)", ylabel="|error|", title="Formation output errors" if formation.followers else "Goal distance")
     ax_v.set(xlabel="time (s)", ylabel="v (m/s)", title="Driving speed demands")
     ax_w.set(xlabel="time (s)", ylabel=r"$\omega$ (rad/s)", title="Turn-rate demands")
@@ -137,7 +138,8 @@ def plot_formation(result, path=None, member: int = 0, snapshots: int = 6):
         ax_err.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, frameon=False)
     fig.legend(*ax_path.get_legend_handles_labels(), loc="outside lower center", ncol=min(4, len(formation.robots) + 1),
                fontsize=8, frameon=False)
-    fig.suptitle(f"{formation.name}: {len(formation.robots)} robots, {t[-1]:.5g} s, dt = {formation.dt:g} s")
+    count = len(formation.robots)
+    fig.suptitle(f"{formation.name}: {count} robot{'s' if count > 1 else ''}, {t[-1]:.5g} s, dt = {formation.dt:g} s")
     if path is not None:
         fig.savefig(path, dpi=110)
         plt.close(fig)
