@@ -1,4 +1,6 @@
 """Gain sweeps: grid parsing, trend classification, batch = direct simulations."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -120,3 +122,27 @@ def test_a_chunk_builds_only_its_own_robots_and_they_are_the_whole_grid_s():
     follower = next(r for r in chain.robots if isinstance(r, Follower))
     axes = [GainAxis.linear("k1", 0.5, 2.0, 6)]
     assert sweep_robots(follower, axes, span=slice(2, 5)) == sweep_robots(follower, axes)[2:5]
+
+
+def test_a_follower_s_sweep_reports_the_output_its_parameters_drive():
+    """An l–φ follower's separation error does not depend on its bearing's gain k2 (the
+    outputs are decoupled): a k2 sweep reports the bearing's error, which falls as k2
+    rises, equal to the follower's heading statistics run alone; a k1 sweep the separation's."""
+    from nonholo import examples
+    from nonholo.studies.sweep import run_sweep
+
+    chain = nh.load_scenario(examples.path("formation-chain"))
+    # fixed sub-steps: a batch's plan is its copies' (their fastest rates), a run alone its own
+    chain = dataclasses.replace(chain, robots=chain.robots[:2], duration=5.0, substeps=8)
+    bearing = run_sweep(chain, [GainAxis.linear("k2", 0.5, 2.0, 4)], robot="f1", progress=False)
+    assert (bearing.output, bearing.unit) == ("phi", "rad") and bearing.to_dict()["output"] == "phi"
+    assert bearing.trend().word == "decreases"
+    f1 = chain.robots[1]
+    alone = nh.simulate(dataclasses.replace(chain, robots=(chain.robots[0], dataclasses.replace(f1, k2=1.5))),
+                        record=False).metrics
+    assert bearing.values[2] == pytest.approx(alone.heading_mean[1], rel=1e-12)
+    separation = run_sweep(chain, [GainAxis.linear("k1", 0.5, 2.0, 4)], robot="f1", progress=False)
+    assert (separation.output, separation.unit) == ("l", "m") and separation.trend().word == "decreases"
+    assert separation.values[0] == pytest.approx(
+        nh.simulate(dataclasses.replace(chain, robots=(chain.robots[0], dataclasses.replace(f1, k1=0.5))),
+                    record=False).metrics.error_mean[1], rel=1e-12)

@@ -94,9 +94,11 @@ def describe(result) -> str:
              f"{timing['chunks']} chunk(s)",
              "varied: " + ", ".join(f"{k} ~ {v}" for k, v in out["vary"].items()),
              f"{'metric':<40} {'mean':>10} {'q05':>10} {'q50':>10} {'q95':>10} {'n':>7}"]
+    varied = {field.split(".", 1)[0] for field in out["vary"]}   # (their heading: a follower's second output)
     for name, s in out["metrics"].items():
-        if s["n"] and name.rsplit(".", 1)[1] in ("error_mean", "error_rms", "error_max", "effort", "peak_omega",
-                                                 "min_distance"):
+        robot, metric = name.rsplit(".", 1)
+        if s["n"] and (metric in ("error_mean", "error_rms", "error_max", "effort", "peak_omega", "min_distance")
+                       or robot in varied and metric in ("heading_rms", "heading_max")):
             q = s["quantiles"]
             cells = [s["mean"], q["q05"], q["q50"], q["q95"]]
             lines.append(f"{name[:40]:<40} " + " ".join("      null" if v is None else f"{v:>10.4g}" for v in cells)

@@ -90,15 +90,17 @@ def describe(result) -> str:
 
     values = result.values
     where = ", ".join(f"{name} = {value:g}" for name, value in result.best().items())
+    whose = "" if result.output == "position" else f" {result.output}"
     lines = [wrap(f"{result.scenario}, robot {result.robot} ({result.controller}): {result.points} points simulated "
-                  f"in {result.elapsed_s:.2f} s (one batch, wall time); lowest {result.metric} error {values.min():.4g} m "
-                  f"at {where}", 100)]
+                  f"in {result.elapsed_s:.2f} s (one batch, wall time); lowest {result.metric}{whose} error "
+                  f"{values.min():.4g} {result.unit} at {where}", 100)]
     warning = result.edge_warning()
     if warning:
         lines.append(wrap(warning, 100))
     if len(result.axes) == 1:
         axis = result.axes[0]
-        lines.append(f"trend of the {result.metric} error as {axis.name} increases: {result.trend().word}")
+        lines.append(f"trend of the {result.metric}{whose} error as {axis.name} increases: {result.trend().word}")
         if axis.values.size <= 50:
-            lines += [f"  {axis.name} = {g:<10.4g} {result.metric} = {v:.6g} m" for g, v in zip(axis.values, values)]
+            lines += [f"  {axis.name} = {g:<10.4g} {result.metric} = {v:.6g} {result.unit}"
+                      for g, v in zip(axis.values, values)]
     return "\n".join(lines)

@@ -36,6 +36,7 @@ SEPARATION_BEARING = "separation-bearing"
 SEPARATION_SEPARATION = "separation-separation"
 FORMATION_LAWS = (SEPARATION_BEARING, SEPARATION_SEPARATION)
 OUTPUTS = {SEPARATION_BEARING: ("l", "phi"), SEPARATION_SEPARATION: ("l1", "l2")}
+SECOND_OUTPUT_PARAMETERS = frozenset({"k2", "phi", "l2"})   # a follower's parameters that drive its second output
 CHANGE_MODES = ("step", "ramp")
 DIRECTIONS = ("shortest", "counterclockwise", "clockwise")
 PICONET_SLAVES = 7

@@ -44,7 +44,7 @@ from nonholo.errors import NonholoInputError
 from nonholo.sim import kernel as kn
 from nonholo.sim.result import Metrics
 from nonholo.sim.links import LinkSettings
-from nonholo.sim.scenario import Follower, Robot, Scenario
+from nonholo.sim.scenario import SECOND_OUTPUT_PARAMETERS, Follower, Robot, Scenario
 from nonholo.sim.simulator import diverged, simulate
 from nonholo.studies import distributed
 from nonholo.studies.sweep import with_gains
@@ -454,7 +454,11 @@ def run_montecarlo(text: str, variations_text: Sequence[str], samples: int, seed
     columns = metric_columns(part)
     affected = [v.robot for v in variations if v.robot != NETWORK] or \
         [r.name for r in part.robots if isinstance(r, Follower)] or [part.names[0]]   # links move followers
-    worst_by = worst_by or f"{affected[0]}.error_max"
+    # a follower's metrics: error_* of its first output (l, l1), heading_* of its second (φ, l2);
+    # ranked by the one its first varied parameter drives
+    drives = next((v.path.rsplit(".", 1)[-1] for v in variations if v.robot == affected[0]), "")
+    second = isinstance(part.robots[part.names.index(affected[0])], Follower) and drives in SECOND_OUTPUT_PARAMETERS
+    worst_by = worst_by or f"{affected[0]}.{'heading_max' if second else 'error_max'}"
     if worst_by not in columns:
         raise NonholoInputError(f"--worst-by {worst_by!r}: not a metric (e.g. {', '.join(columns[:4])}, …)"[:300])
     values = draw(variations, samples, seed)

@@ -263,7 +263,8 @@ def plot_sweep(sweep, path=None, ax=None, default: float | None = None, claim: s
         fig.subplots_adjust(left=0.14, right=0.97, bottom=0.12, top=0.86)
     else:
         fig = ax.figure
-    label = f"{sweep.metric} error norm (m)"
+    label = f"{sweep.metric} error norm (m)" if sweep.output == "position" else \
+        f"{sweep.metric} |{sweep.output} error| ({sweep.unit})"
     if len(sweep.axes) == 1:
         axis = sweep.axes[0]
         ax.plot(axis.values, sweep.values, "o-", ms=3, lw=1.5)

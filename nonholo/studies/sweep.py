@@ -25,6 +25,7 @@ import numpy as np
 
 from nonholo import Follower, Robot, Scenario, simulate
 from nonholo.errors import NonholoInputError
+from nonholo.sim.scenario import SECOND_OUTPUT_PARAMETERS
 from nonholo.studies import distributed
 
 METRICS = ("mean", "rms", "max", "final")
@@ -132,6 +133,8 @@ class SweepResult:
     metric: str
     errors: dict
     elapsed_s: float  # of the whole batch this sweep was simulated in
+    output: str = "position"   # whose error: a root's position; a follower's l, phi, l1 or l2
+    unit: str = "m"
 
     @property
     def values(self) -> np.ndarray:
@@ -192,6 +195,7 @@ class SweepResult:
 
     def to_dict(self) -> dict:
         out = {"scenario": self.scenario, "robot": self.robot, "controller": self.controller, "metric": self.metric,
+               "output": self.output, "unit": self.unit,
                "axes": {a.name: a.values.tolist() for a in self.axes}, "points": self.points,
                "errors": {s: self.errors[s].tolist() for s in _STATISTICS}}
         out["best"] = {"point": self.best(), "value": float(self.values.min()), "on_edge": self.best_on_edge()}
@@ -331,9 +335,32 @@ def run_sweeps(scenario: Scenario, specs: Sequence[SweepSpec], metric: str = "me
         shape = tuple(a.values.size for a in spec.axes)
         errors = outputs[number] if graph else {s: outputs[0][s][spans[number]] for s in _STATISTICS}
         law = base.law if isinstance(base, Follower) else base.controller.name
+        output, unit = swept_output(base, spec)
         sweeps.append(SweepResult(scenario.name, base.name, law, tuple(spec.axes), metric,
-                                  {s: errors[s].reshape(shape).copy() for s in _STATISTICS}, elapsed))
+                                  {s: errors[s].reshape(shape).copy() for s in _STATISTICS}, elapsed, output, unit))
     return sweeps
+
+
+def swept_output(base, spec: SweepSpec) -> tuple[str, str]:
+    """Whose error a sweep reports, and its unit: a root's position error; a follower's
+    second output (φ or l2) when every swept parameter drives it (k2, phi, l2), else its
+    first (l or l1): an l–φ follower's separation does not depend on its bearing's gain."""
+    if not isinstance(base, Follower):
+        return "position", "m"
+    second = all(a.name in SECOND_OUTPUT_PARAMETERS for a in spec.axes)
+    name = base.outputs[1 if second else 0]
+    return name, "rad" if name == "phi" else "m"
+
+
+def _output_statistics(metrics, index, output: str) -> dict:
+    """The sweep's statistics (``_STATISTICS``) of robot ``index`` (an index or a slice) for
+    ``output``: the first output's are the kernel's error statistics, the second's its
+    heading statistics (its std from its mean and rms)."""
+    if output not in ("phi", "l2"):
+        return {s: np.atleast_1d(getattr(metrics, f"error_{s}")[index]) for s in _STATISTICS}
+    mean, rms = np.atleast_1d(metrics.heading_mean[index]), np.atleast_1d(metrics.heading_rms[index])
+    return {"mean": mean, "std": np.sqrt(np.maximum(rms * rms - mean * mean, 0.0)), "rms": rms,
+            "max": np.atleast_1d(metrics.heading_max[index]), "final": np.atleast_1d(metrics.heading_final[index])}
 
 
 def _specs(pairs) -> list[SweepSpec]:
@@ -383,7 +410,7 @@ def sweep_chunk(payload: dict) -> dict:
                 robots += sweep_robots(base, spec.axes, f"{number}:" if len(specs) > 1 else "", slice(lo, hi))
         batch = dataclasses.replace(scenario, robots=tuple(robots), steps=None, name=f"{scenario.name}-sweep")
         metrics = simulate(batch, record=False, progress=payload["progress"]).metrics
-        return {s: np.atleast_1d(getattr(metrics, f"error_{s}")) for s in _STATISTICS}
+        return _output_statistics(metrics, slice(None), "position")
     spec = specs[payload["which"]]
     base = choose_robot(scenario, [x.name for x in spec.axes], spec.robot)
     index = scenario.names.index(base.name)
@@ -391,7 +418,7 @@ def sweep_chunk(payload: dict) -> dict:
                                    steps=None, name=f"{scenario.name}-sweep")
                for robot in sweep_robots(base, spec.axes, span=slice(a, b))]
     metrics = simulate(members, record=False, progress=payload["progress"]).metrics
-    return {s: np.atleast_1d(getattr(metrics, f"error_{s}")[index]) for s in _STATISTICS}
+    return _output_statistics(metrics, index, swept_output(base, spec)[0])
 
 
 def run_sweep(scenario: Scenario, axes: Sequence[GainAxis], robot: str | None = None, metric: str = "mean",
