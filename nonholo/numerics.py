@@ -55,7 +55,7 @@ TWO_PI = 2.0 * math.pi
 @njit(inline="always", error_model="numpy")
 def sincos(x):
     """(sin x, cos x), branch-free so that loops calling it vectorize."""
-    k = math.floor(x * _TWO_OVER_PI + 0.5)
+    k = np.floor(x * _TWO_OVER_PI + 0.5)   # (a float: math.floor's int would be converted back)
     r = ((x - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
     z = r * r
     sin_r = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))

@@ -22,8 +22,9 @@ spread the range of the ratios of the same round.
 
 **Where the time goes** (``step_profile``, ``nonholo bench --profile``): the batch step taken
 apart with the kernel's own compiled pieces run alone over the same batch — one law evaluation
-(``root_command``: sin/cos of θ, the law, the actuator limits), one RK4 step (``root_rk4``: four
-evaluations, the plant, the combination; the sample at t_k takes the first stage's command),
+(``root_command``: sin/cos of θ, the law, the actuator limits), one RK4 step (four evaluations, the
+plant, the combination, stage by stage as the kernel runs them; the sample at t_k takes the
+first stage's command),
 the batch kernel's own time loop (``Kernel.roots``: the RK4 steps and the samples, whose
 errors, running statistics and event counts are what it adds to them), and a run of two steps
 (the Python set-up and result) — and the single run taken apart into the reference table, the
@@ -251,13 +252,39 @@ def _probe_commands(law, gains, state, rows, n_steps, sink):
 
 @njit(**_PROBE)
 def _probe_rk4(law, gains, state, rows, h, n_steps):
-    """One RK4 step per robot and step (``root_rk4``: four evaluations, plant, combination)."""
-    for k in range(n_steps):
-        r0, r1, r2 = kn.row_values(rows, 2 * k), kn.row_values(rows, 2 * k + 1), kn.row_values(rows, 2 * k + 2)
-        for b in range(state.shape[1]):
-            new, _, _, _, _ = kn.root_rk4_fused(law, gains, state[0, b], state[1, b], state[2, b], state[3, b], r0,
-                                                r1, r2, h, np.inf, np.inf)
-            state[0, b], state[1, b], state[2, b], state[3, b] = new
+    """One RK4 step per robot and step, stage by stage as ``Kernel.roots`` runs it (``ROOTS_CHUNK``
+    robots at a time through the whole time range, a loop over them per stage, the rates k1,
+    k2, k3 kept between the stages; ``root_command``: four evaluations, the plant, the
+    combination), without the sample at t_k."""
+    n = state.shape[1]
+    slope = np.empty((12, kn.ROOTS_CHUNK))
+    half, sixth = 0.5 * h, h / 6.0
+    for start in range(0, n, kn.ROOTS_CHUNK):
+        c0, c1 = np.uint64(start), np.uint64(min(start + kn.ROOTS_CHUNK, n))
+        for k in range(n_steps):
+            r0, r1, r2 = kn.row_values(rows, 2 * k), kn.row_values(rows, 2 * k + 1), kn.row_values(rows, 2 * k + 2)
+            for b in range(c0, c1):
+                v, omega, xi_dot, _, _, _, c, si = kn.root_command(law, gains, state[0, b], state[1, b], state[2, b],
+                                                                   state[3, b], r0, np.inf, np.inf)
+                i = b - c0
+                slope[0, i], slope[1, i], slope[2, i], slope[3, i] = v * c, v * si, omega, xi_dot
+            for s in range(1, 3):
+                p, q = 4 * s - 4, 4 * s
+                for b in range(c0, c1):
+                    i = b - c0
+                    v, omega, xi_dot, _, _, _, c, si = kn.root_command(
+                        law, gains, state[0, b] + half * slope[p, i], state[1, b] + half * slope[p + 1, i],
+                        state[2, b] + half * slope[p + 2, i], state[3, b] + half * slope[p + 3, i], r1, np.inf, np.inf)
+                    slope[q, i], slope[q + 1, i], slope[q + 2, i], slope[q + 3, i] = v * c, v * si, omega, xi_dot
+            for b in range(c0, c1):
+                i = b - c0
+                v, omega, xi_dot, _, _, _, c, si = kn.root_command(
+                    law, gains, state[0, b] + h * slope[8, i], state[1, b] + h * slope[9, i],
+                    state[2, b] + h * slope[10, i], state[3, b] + h * slope[11, i], r2, np.inf, np.inf)
+                state[0, b] = kn.rk4_sum(state[0, b], sixth, slope[0, i], slope[4, i], slope[8, i], v * c)
+                state[1, b] = kn.rk4_sum(state[1, b], sixth, slope[1, i], slope[5, i], slope[9, i], v * si)
+                state[2, b] = kn.rk4_sum(state[2, b], sixth, slope[2, i], slope[6, i], slope[10, i], omega)
+                state[3, b] = kn.rk4_sum(state[3, b], sixth, slope[3, i], slope[7, i], slope[11, i], xi_dot)
 
 
 PROFILE_PARTS = (

@@ -79,6 +79,28 @@ llvmlite.binding.set_option("nonholo", "-vectorize-memory-check-threshold=1024")
 # over the batch: raise it.
 llvmlite.binding.set_option("nonholo", "-inline-threshold=100000")
 
+
+def _noalias() -> dict:
+    """``noalias=True`` for ``njit``, where this numba has it. numba marks the array data
+    pointers of such a function ``noalias`` (its compiler flag ``noalias``, which ``njit`` does
+    not map from an option: mapped here), so that LLVM vectorizes its loops without run-time
+    overlap checks — the batch loop of lone roots compiles in half the time. Only for a
+    function whose arrays are distinct objects at every call (``run_roots``)."""
+    try:
+        from numba.core.compiler import Flags
+        from numba.core.cpu import CPUTargetOptions
+        from numba.core.options import TargetOptions
+    except ImportError:
+        return {}
+    if not hasattr(Flags, "noalias"):
+        return {}
+    if not hasattr(CPUTargetOptions, "noalias"):
+        CPUTargetOptions.noalias = TargetOptions.Mapping("noalias")
+    return {"noalias": True}
+
+
+NOALIAS = _noalias()
+
 ROOT_A, ROOT_B, SEPARATION_BEARING, SEPARATION_SEPARATION = range(4)
 MAX_FIELDS = FIELDS_SIZE   # a root's law fields (at most MAX_LAW_FIELDS); a follower uses 3
 K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
@@ -98,8 +120,9 @@ assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK,
 ALONE_BELOW = 4
 # Batches of lone roots under continuous-time control run this many copies at a time through
 # the whole time loop (``Kernel.roots``): their state and statistics stay in the core's caches.
-ROOTS_CHUNK = 256
+ROOTS_CHUNK = 128
 KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
+SLOPE_COUNT = 12   # what ``roots`` keeps of a copy's RK4 step between its stages: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇)
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
@@ -872,74 +895,115 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))
 
     @njit(inline="always", **_OPTIONS)
-    def advance(r, b, state, fields, limits, r0, r1, r2, h):
-        """One RK4 step of copy b of root r, its state updated: its (x, y, θ) before the step and
-        the step's four stages (``root_rk4``; the first stage's command is the one in force at
-        the step's start)."""
-        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-        new, s1, s2, s3, s4 = root_rk4(law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, r0, r1, r2,
-                                       h, limits[0, r, b], limits[1, r, b])
-        state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = new
-        return x, y, theta, s1, s2, s3, s4
+    def root_stage(r, b, fields, limits, x, y, theta, xi, ref):
+        """Copy b of root r at one RK4 stage: its rates (ẋ, ẏ, θ̇, ξ̇) and command (v, ω,
+        singular, sat v, sat ω)."""
+        v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t = command(
+            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, limits[0, r, b], limits[1, r, b])
+        dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
+        return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
 
-    @njit(**_OPTIONS)
+    @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
     def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                  n_steps, stats, record, step_rate, sample):
-        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned)."""
+                  n_steps, stats, record, step_rate, sample, slope):
+        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned). An RK4 step runs
+        stage by stage, one loop over the copies each, ``slope`` keeping each copy's k1, k2,
+        k3 (rows 0–3, 4–7, 8–11: ẋ, ẏ, θ̇, ξ̇) for the next stages: the body of one stage is
+        short enough for the processor to overlap the dependent chains of successive copies,
+        which a body of all four stages (longer than its reorder window) was not. The same
+        operations as ``root_rk4``, in the same order."""
         for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
-            last = k == n_steps
-            for j in range(1 if last else substeps[k]):
+            if k == n_steps:   # the last sample's command is no RK4 stage: the law alone
+                ref = row_values(rows, row)
+                for b in range(c0, c1):
+                    x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                    _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, xi,
+                                                                               ref)
+                    keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, step_rate)
+                break
+            m = substeps[k]
+            h = dt / m
+            half, sixth = 0.5 * h, h / 6.0
+            # Unrecorded, the sample at t_k goes to the statistics in the first stage's own loop:
+            # their stores then overlap the stage's arithmetic.
+            inline_sample = record.shape[1] == 0 and not measuring
+            for j in range(m):
+                r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
+                    row_values(rows, row + 2 * j + 2)
                 peak = 0.0
-                added = False   # the sample at t_k added to the statistics in the step's own loop
-                if last:   # the last sample's command is no RK4 stage: the law alone
-                    ref = row_values(rows, row)
+                if j == 0 and inline_sample:   # stage 1 and the sample at t_k (its command: stage 1's)
                     for b in range(c0, c1):
+                        i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                        v, omega, _, singular, sat_v, sat_w, _, _ = command(
-                            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, limits[0, r, b],
-                            limits[1, r, b])
-                        keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                else:
-                    h = dt / substeps[k]
-                    r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
-                        row_values(rows, row + 2 * j + 2)
-                    # Unrecorded, the sample at t_k goes to the statistics inside the step's loop:
-                    # their stores then overlap the step's arithmetic (after the step, in a loop of
-                    # their own, they were bound by the stores: 1 ns per robot-step more).
-                    added = j == 0 and record.shape[1] == 0 and not measuring
-                    if added:
-                        for b in range(c0, c1):
-                            x, y, theta, s1, s2, s3, s4 = advance(r, b, state, fields, limits, r0, r1, r2, h)
-                            err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
-                            store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, s1[5], s1[6],
-                                                                 s1[7], s1[8], s1[9], err1, err2))
-                    else:
-                        for b in range(c0, c1):
-                            x, y, theta, s1, s2, s3, s4 = advance(r, b, state, fields, limits, r0, r1, r2, h)
-                            keep_sample(sample, b - c0, x, y, theta, s1[3], s1[5], s1[6], s1[7], s1[8], s1[9])
-                            if measuring:
-                                peak = max(peak, stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
-                                           stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+                        dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
+                                                                                            theta, xi, r0)
+                        slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
+                        err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
+                        store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
+                                                             sat_v, sat_w, err1, err2))
+                else:   # stage 1, its command kept for the sample (``add_samples``)
+                    for b in range(c0, c1):
+                        i = b - c0
+                        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
+                                                                                            theta, xi, r0)
+                        slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
+                        keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                        if measuring:
+                            peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                for b in range(c0, c1):   # stage 2: from x + h/2 k1, at t + h/2
+                    i = b - c0
+                    x, y = state[0, r, b] + half * slope[0, i], state[1, r, b] + half * slope[1, i]
+                    theta, xi = state[2, r, b] + half * slope[2, i], state[3, r, b] + half * slope[3, i]
+                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r1)
+                    slope[4, i], slope[5, i], slope[6, i], slope[7, i] = dx, dy, dtheta, dxi
+                    if measuring:
+                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                for b in range(c0, c1):   # stage 3: from x + h/2 k2, at t + h/2
+                    i = b - c0
+                    x, y = state[0, r, b] + half * slope[4, i], state[1, r, b] + half * slope[5, i]
+                    theta, xi = state[2, r, b] + half * slope[6, i], state[3, r, b] + half * slope[7, i]
+                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r1)
+                    slope[8, i], slope[9, i], slope[10, i], slope[11, i] = dx, dy, dtheta, dxi
+                    if measuring:
+                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
+                    i = b - c0
+                    x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                    x, y, theta, xi = x0 + h * slope[8, i], y0 + h * slope[9, i], theta0 + h * slope[10, i], \
+                        xi0 + h * slope[11, i]
+                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r2)
+                    state[0, r, b] = rk4_sum(x0, sixth, slope[0, i], slope[4, i], slope[8, i], dx)
+                    state[1, r, b] = rk4_sum(y0, sixth, slope[1, i], slope[5, i], slope[9, i], dy)
+                    state[2, r, b] = rk4_sum(theta0, sixth, slope[2, i], slope[6, i], slope[10, i], dtheta)
+                    state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], slope[7, i], slope[11, i], dxi)
+                    if measuring:
+                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                 if measuring:
                     step_rate[k] = max(step_rate[k], peak)
-                if j == 0 and not added:
-                    add_samples(sample, r, c0, c1, row_values(rows, row), k, posture_a, fields, stats, record,
-                                step_rate)
+                if j == 0 and not inline_sample:
+                    add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, step_rate)
 
-    @njit(**_OPTIONS)
     def roots(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
               branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
               record, held, step_rate, held_given):
+        """``integrate`` (same arguments) for lone roots under continuous-time control:
+        ``run_roots`` over ``ROOTS_CHUNK`` copies at a time. A Python loop over the chunks (a
+        call each), not a compiled one: a compiled caller optimized and generated
+        ``run_roots``'s code a second time (2 s of a fresh install's compiling per law)."""
         n_batch = state.shape[2]
         sample = np.empty((KEPT_COUNT, min(ROOTS_CHUNK, n_batch)))
+        slope = np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch)))
+        span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
                 # unsigned copy indices: no negative-index wrap-around for LLVM to keep, which
                 # would stop it vectorizing the loop over them
                 c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
-                run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                          n_steps, stats, record, step_rate, sample)
+                run_roots(np.int64(r), c0, c1, state, fields, limits, rows, row_start, substeps, float(xi_speed),
+                          float(dt), *span, stats, record, step_rate, sample, slope)
 
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
@@ -947,7 +1011,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
         evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
-        + ((run_roots, roots) if not followers else ())}
+        + ((run_roots,) if not followers else ())}
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls

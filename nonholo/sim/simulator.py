@@ -344,17 +344,21 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         return (laws, tuple(_structure(r, local) for r in robots), id(prior)), prior
 
     lone: dict[tuple, tuple] = {}   # lone roots of one law, goal kind and prior rate describe alike
+    described: dict[tuple, tuple] = {}   # and those of one configuration object (a batch shares a few)
+    robots = first.robots
     for component in first.components():
-        robots = [first.robots[i] for i in component]
-        if len(robots) == 1 and isinstance(robots[0], Robot):
-            config = robots[0].controller
-            key = (config.controller.gain_tuple, _structure(robots[0], {}),
-                   _prior_rate(robots, v_peak, omega_peak, known))
-            if key not in lone:
-                lone[key] = describe(robots)
-            group_key, prior = lone[key]
+        robot = robots[component[0]]
+        if len(component) == 1 and isinstance(robot, Robot):
+            tag = (id(robot.controller), robot.goal is None)
+            if tag not in described:
+                key = (robot.controller.controller.gain_tuple, _structure(robot, {}),
+                       _prior_rate([robot], v_peak, omega_peak, known))
+                if key not in lone:
+                    lone[key] = describe([robot])
+                described[tag] = lone[key]
+            group_key, prior = described[tag]
         else:
-            group_key, prior = describe(robots)
+            group_key, prior = describe([robots[i] for i in component])
         by_key[group_key].append((component, prior))
     groups = []
     for (laws, _, _), entries in by_key.items():
