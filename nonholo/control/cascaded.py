@@ -14,8 +14,7 @@ from __future__ import annotations
 from numba import njit
 
 from nonholo.control.declare import ABOVE_MINUS_ONE, POSITIVE, Gain, control_law
-from nonholo.control.tracking_errors import tracking_errors
-from nonholo.numerics import sincos
+from nonholo.control.tracking_errors import heading_error_sincos, tracking_errors
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 
@@ -42,5 +41,5 @@ def cascaded_sine_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     c1, c2, c3 = gains.c1, gains.c2, gains.c3
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
-    sin_e3, _ = sincos(e3)
+    sin_e3, _ = heading_error_sincos(cos_theta, sin_theta, ref)
     return _driving_speed(c2, c3, e1, e2, v_d, omega_d), omega_d + c1 * sin_e3, 0.0, 0.0

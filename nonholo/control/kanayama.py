@@ -15,8 +15,7 @@ import math
 from numba import njit
 
 from nonholo.control.declare import POSITIVE, Gain, control_law
-from nonholo.control.tracking_errors import tracking_errors
-from nonholo.numerics import sincos
+from nonholo.control.tracking_errors import heading_error_sincos, tracking_errors
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 
@@ -30,5 +29,5 @@ def kanayama_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     kx, ky, ktheta = gains.kx, gains.ky, gains.ktheta
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
-    sin_e3, cos_e3 = sincos(e3)
+    sin_e3, cos_e3 = heading_error_sincos(cos_theta, sin_theta, ref)
     return v_d * cos_e3 + kx * e1, omega_d + v_d * (ky * e2 + ktheta * sin_e3), 0.0, 0.0

@@ -23,8 +23,8 @@ import math
 from numba import njit
 
 from nonholo.control.declare import POSITIVE, UNIT_INTERVAL, Gain, control_law
-from nonholo.control.tracking_errors import tracking_errors
-from nonholo.numerics import sinc_of, sincos
+from nonholo.control.tracking_errors import heading_error_sincos, tracking_errors
+from nonholo.numerics import sinc_of
 from nonholo.references.feedforward import REF_OMEGA, REF_V
 
 
@@ -52,7 +52,7 @@ def approximate_linearization_law(x, y, theta, cos_theta, sin_theta, xi, ref, ga
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     k = _scheduled_gain(zeta, b, v_d, omega_d)
-    _, cos_e3 = sincos(e3)
+    _, cos_e3 = heading_error_sincos(cos_theta, sin_theta, ref)
     return v_d * cos_e3 + k * e1, omega_d + b * v_d * e2 + k * e3, 0.0, 0.0
 
 
@@ -69,5 +69,5 @@ def nonlinear_law(x, y, theta, cos_theta, sin_theta, xi, ref, gains):
     v_d, omega_d = ref[REF_V], ref[REF_OMEGA]
     e1, e2, e3 = tracking_errors(x, y, theta, cos_theta, sin_theta, ref)
     k = _scheduled_gain(zeta, b, v_d, omega_d)
-    sin_e3, cos_e3 = sincos(e3)
+    sin_e3, cos_e3 = heading_error_sincos(cos_theta, sin_theta, ref)
     return v_d * cos_e3 + k * e1, omega_d + b * v_d * sinc_of(e3, sin_e3) * e2 + k * e3, 0.0, 0.0
