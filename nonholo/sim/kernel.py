@@ -953,6 +953,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                         if measuring:
                             peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
+                # variables (one loop over both stages, or a helper taking them) LLVM cannot tell
+                # the rows read from the rows written, and the loop ran 2.7x slower.
                 for b in range(c0, c1):   # stage 2: from x + h/2 k1, at t + h/2
                     i = b - c0
                     x, y = state[0, r, b] + half * slope[0, i], state[1, r, b] + half * slope[1, i]
