@@ -41,8 +41,8 @@ def fleet_file(tmp_path, duration=2.0):
     return path, scenario, dataclasses.replace(config, keys=keys)
 
 
-def run(path, scenario, config, observe):
-    return run_fleet(scenario, "tcp", config=config, source=path, observe=observe, wait_s=15.0)
+def run(path, scenario, config, observe, speed=None):
+    return run_fleet(scenario, "tcp", config=config, source=path, observe=observe, wait_s=15.0, speed=speed)
 
 
 async def keyless_client(port: int) -> bytes:
@@ -94,7 +94,9 @@ def test_a_keyless_client_gets_nothing_and_the_fleet_is_unaffected(tmp_path):
     attacker = threading.Thread(target=attack, args=(endpoint.port, results, stop))
     try:
         attacker.start()
-        fleet = run(path, scenario, config, endpoint.address)
+        # paced at twice real time: the robots stream their statuses for 1 s of wall time, so
+        # that the count below does not hang on how fast a loaded machine runs the lockstep
+        fleet = run(path, scenario, config, endpoint.address, speed=2.0)
     finally:
         stop.set()
         attacker.join(30)
