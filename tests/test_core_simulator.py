@@ -277,3 +277,23 @@ def test_a_plan_s_reference_table_is_built_once(monkeypatch):
     built.clear()
     simulate(still)
     assert len(built) == 1
+
+
+def test_a_record_has_link_rows_only_where_the_scenario_has_followers():
+    """Lone roots record their robot rows only (a follower's link rows would be zeros); a
+    scenario with followers records every row, a lone root's link rows zeros and its robot
+    rows those of its run alone."""
+    eight = Scenario(references.eight(), [Robot("r", controller("dynamic-feedback"), (0.5, -0.5, 0.3))], duration=2.0,
+                     dt=0.01)
+    alone = simulate(eight)
+    assert alone.record.shape == (kn.REC_ROBOT_COUNT, eight.n_steps + 1, 1, 1)
+    assert not alone.outputs("r")[0].any() and not alone.sin_gamma_difference("r").any()   # no link: zeros
+    chain = load_scenario(examples.resolve("formation-chain"))
+    mixed = dataclasses.replace(chain, robots=(*chain.robots[:2], eight.robots[0]), duration=2.0, reference=eight.reference,
+                                piconet=False)
+    both = simulate(mixed)
+    assert both.record.shape == (kn.REC_COUNT, mixed.n_steps + 1, 3, 1)
+    assert np.array_equal(both.record[:kn.REC_ROBOT_COUNT, :, 2], alone.record[:, :, 0])
+    assert not both.record[kn.REC_ROBOT_COUNT:, :, 2].any()
+    l, phi = both.outputs(chain.robots[1].name)
+    assert l[0] > 0 and np.isfinite(phi).all()   # the follower's link rows are recorded

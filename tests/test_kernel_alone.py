@@ -134,7 +134,7 @@ def test_integrate_refuses_what_it_leaves_to_roots_and_alone():
 
 
 def score_both(scenario: Scenario, record: np.ndarray):
-    """Score the recorded trajectory ``record`` (REC_COUNT, N+1, 1, 1) of the one robot of
+    """Score the recorded trajectory ``record`` (rows, N+1, 1, 1) of the one robot of
     ``scenario`` with ``score_alone`` and with the loops over the batch (``score``): the
     (stats, record) of each."""
     (robot,) = scenario.robots
@@ -157,7 +157,7 @@ def score_both(scenario: Scenario, record: np.ndarray):
     out = []
     for score in (kernel.score_alone, kernel.score):
         stats, pair_stats = kn.new_stats(1, 1)
-        scored = np.empty((kn.REC_COUNT, grid.size, 1, 1))
+        scored = np.empty((kn.record_rows(False), grid.size, 1, 1))
         score(states, fields, limits, rows, *graph, stats, pair_stats, scored, 0, np.zeros((0, kn.HELD_COUNT, 1, 1)))
         out.append((stats, scored))
     return out

@@ -21,7 +21,9 @@ R robots of one graph, listed so that ``order`` visits parents before children; 
 * ``branch``  (R, B): each l–φ bearing on its continuous 2π branch
 * ``stats``   (STAT_COUNT, R, B) running statistics sampled at t_k = k·dt; ``pair_stats``
   (PAIR_COUNT, B) the closest pair of each copy; ``d_max`` (B,) its largest castor offset
-* ``record``  (REC_COUNT, N + 1, R, B), or (REC_COUNT, 0, R, B) for statistics only
+* ``record``  (rows, N + 1, R, B), or (rows, 0, R, B) for statistics only: ``REC_ROBOT_COUNT``
+  rows of every robot, then, in graphs with followers only, ``REC_LINK_COUNT`` rows of a
+  follower's link (``record_rows``)
 * ``held``    (HELD_COUNT, R, B): commands held between control instants (sampled data)
 * ``step_rate`` (N + 1,): the fastest rate met during each output step (|ω| of every robot and
   |ξ̇/ξ| of speed compensators), measured only for graphs with followers (sub-step planning)
@@ -125,9 +127,19 @@ KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ,
 SLOPE_COUNT = 12   # what ``roots`` keeps of a copy's RK4 step between its stages: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇)
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
-(REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_OUT1, REC_OUT2, REC_ERR1, REC_ERR2, REC_RATE1, REC_RATE2,
- REC_SIN_GAMMA, REC_SINGULAR, REC_SATURATED) = range(15)
-REC_COUNT = 15   # ``record_row`` and ``store_record`` hold a sample in this order
+(REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_ERR1, REC_ERR2, REC_SINGULAR, REC_SATURATED, REC_OUT1,
+ REC_OUT2, REC_RATE1, REC_RATE2, REC_SIN_GAMMA) = range(15)
+REC_COUNT = 15
+# ``record_row`` and ``store_record`` hold a robot's rows in this order, ``link_row`` and
+# ``store_link_record`` a follower's link rows after them; records of graphs without followers
+# have the robot rows only (the link rows would be zeros: a third of a recorded lone root).
+REC_ROBOT_COUNT = REC_SATURATED + 1
+REC_LINK_COUNT = REC_COUNT - REC_ROBOT_COUNT
+
+
+def record_rows(followers: bool) -> int:
+    """The rows of a record of a graph with followers (``REC_COUNT``) or without (``REC_ROBOT_COUNT``)."""
+    return REC_COUNT if followers else REC_ROBOT_COUNT
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
 HELD_COUNT = 6
 # What one evaluation at an instant gives per robot (``instant`` array rows).
@@ -357,16 +369,22 @@ def store_stats(stats, r, b, values):
 
 @njit(inline="always", **_OPTIONS)
 def store_record(record, k, r, b, row):
-    """Write one sample of a robot's record (``record_row``)."""
+    """Write one sample of a robot's record rows (``record_row``)."""
     (record[0, k, r, b], record[1, k, r, b], record[2, k, r, b], record[3, k, r, b], record[4, k, r, b],
-     record[5, k, r, b], record[6, k, r, b], record[7, k, r, b], record[8, k, r, b], record[9, k, r, b],
-     record[10, k, r, b], record[11, k, r, b], record[12, k, r, b], record[13, k, r, b], record[14, k, r, b]) = row
+     record[5, k, r, b], record[6, k, r, b], record[7, k, r, b], record[8, k, r, b], record[9, k, r, b]) = row
 
 
 @njit(inline="always", **_OPTIONS)
-def record_row(x, y, theta, xi, v, omega, out1, out2, err1, err2, rate1, rate2, sin_gamma, singular, sat_v, sat_w):
-    """One sample of a robot's record, rows REC_X … REC_SATURATED."""
-    return (x, y, theta, xi, v, omega, out1, out2, err1, err2, rate1, rate2, sin_gamma, singular, sat_v + 2.0 * sat_w)
+def record_row(x, y, theta, xi, v, omega, err1, err2, singular, sat_v, sat_w):
+    """One sample of a robot's record rows, REC_X … REC_SATURATED."""
+    return (x, y, theta, xi, v, omega, err1, err2, singular, sat_v + 2.0 * sat_w)
+
+
+@njit(inline="always", **_OPTIONS)
+def store_link_record(record, k, r, b, out1, out2, rate1, rate2, sin_gamma):
+    """Write one sample of a follower's link rows, REC_OUT1 … REC_SIN_GAMMA (zeros for a root)."""
+    (record[10, k, r, b], record[11, k, r, b], record[12, k, r, b], record[13, k, r, b],
+     record[14, k, r, b]) = out1, out2, rate1, rate2, sin_gamma
 
 
 @njit(inline="always", **_OPTIONS)
@@ -441,8 +459,7 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
         err1, err2 = root_errors(posture != 0, fields, r, b, x0, y0, theta0, ref)
         sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
         if recording:
-            store_record(record, k, r, b, record_row(x0, y0, theta0, xi0, v, omega, 0.0, 0.0, err1, err2, 0.0, 0.0,
-                                                     0.0, singular, sat_v, sat_w))
+            store_record(record, k, r, b, record_row(x0, y0, theta0, xi0, v, omega, err1, err2, singular, sat_v, sat_w))
         if measuring != 0:
             step_rate[k] = max(step_rate[k], abs(omega))
     state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
@@ -649,11 +666,13 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             for r in range(n_robots):
                 for b in range(n_batch):
                     row = record_row(state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b],
-                                     instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_OUT1, r, b],
-                                     instant[I_OUT2, r, b], instant[I_ERR1, r, b], instant[I_ERR2, r, b],
-                                     instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b],
-                                     instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b], instant[I_SAT_OMEGA, r, b])
+                                     instant[I_V, r, b], instant[I_OMEGA, r, b], instant[I_ERR1, r, b],
+                                     instant[I_ERR2, r, b], instant[I_SINGULAR, r, b], instant[I_SAT_V, r, b],
+                                     instant[I_SAT_OMEGA, r, b])
                     store_record(record, k, r, b, row)
+                    if followers:   # (a graph without followers records no link rows)
+                        store_link_record(record, k, r, b, instant[I_OUT1, r, b], instant[I_OUT2, r, b],
+                                          instant[I_RATE1, r, b], instant[I_RATE2, r, b], instant[I_SIN_GAMMA, r, b])
         if followers:
             for r in range(n_robots):
                 if kinds[r] == SEPARATION_SEPARATION:
@@ -887,9 +906,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             for b in range(c0, c1):
                 i = b - c0
                 err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
-                store_record(record, k, r, b, record_row(
-                    sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i], sample[5, i], 0.0, 0.0, err1,
-                    err2, 0.0, 0.0, 0.0, sample[6, i], sample[7, i], sample[8, i]))
+                store_record(record, k, r, b, record_row(sample[0, i], sample[1, i], sample[2, i], sample[3, i],
+                                                         sample[4, i], sample[5, i], err1, err2, sample[6, i],
+                                                         sample[7, i], sample[8, i]))
         if measuring:
             for i in range(c1 - c0):
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))

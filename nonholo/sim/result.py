@@ -119,8 +119,9 @@ class SimulationResult:
     ``t`` (N+1,) the output grid; ``reference_rows`` (N+1, 10) the reference on it (columns
     ``REF_COLUMNS``; None without a reference); ``stats`` (STAT_COUNT, robots, members) the
     kernel's running statistics; ``pair_stats`` (PAIR_COUNT, formations, members) the
-    closest pair of each connected formation; ``record`` (REC_COUNT, N+1, robots, members)
-    when recorded; ``substeps`` (robots,) the most RK4 sub-steps per output step used.
+    closest pair of each connected formation; ``record`` (rows, N+1, robots, members) when
+    recorded (``nonholo.sim.kernel.REC_*``: the robot rows, then the link rows of a follower
+    only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per output step used.
     ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 
@@ -182,10 +183,17 @@ class SimulationResult:
         """(robots, N+1) position-error norm of the roots (to the reference or the goal)."""
         return np.abs(self.field(k.REC_ERR1, member))
 
+    def _link_field(self, index: int, robot, member: int) -> np.ndarray:
+        """A follower's link row over time (zeros for a robot of a scenario without followers,
+        whose record has no link rows)."""
+        record = self._recorded()
+        if record.shape[0] <= index:
+            return np.zeros(record.shape[1])
+        return record[index, :, self.index(robot), member]
+
     def outputs(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """The link outputs (l, φ) or (l1, l2) of a follower over time (φ continuous)."""
-        i = self.index(robot)
-        return self._recorded()[k.REC_OUT1, :, i, member], self._recorded()[k.REC_OUT2, :, i, member]
+        return self._link_field(k.REC_OUT1, robot, member), self._link_field(k.REC_OUT2, robot, member)
 
     def output_errors(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Signed output errors z_d − z of a follower over time, desired minus actual as every
@@ -195,11 +203,10 @@ class SimulationResult:
 
     def output_rates(self, robot, member: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """(l̇, φ̇) or (l̇1, l̇2) from the follower kinematics at the applied commands."""
-        i = self.index(robot)
-        return self._recorded()[k.REC_RATE1, :, i, member], self._recorded()[k.REC_RATE2, :, i, member]
+        return self._link_field(k.REC_RATE1, robot, member), self._link_field(k.REC_RATE2, robot, member)
 
     def sin_gamma_difference(self, robot, member: int = 0) -> np.ndarray:
-        return self._recorded()[k.REC_SIN_GAMMA, :, self.index(robot), member]
+        return self._link_field(k.REC_SIN_GAMMA, robot, member)
 
     # ------------------------------------------------------------------ metrics
     def _stat(self, name: int, i: int, member: int) -> float:

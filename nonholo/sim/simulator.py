@@ -395,7 +395,8 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     v_d0 = float(first.reference.table(grid[:1])[0, REF_V]) if first.reference is not None else 0.0
     stats = np.empty((kn.STAT_COUNT, n_robots, n_members))
     pair_stats = np.full((kn.PAIR_COUNT, len(first.components()), n_members), np.nan)
-    records = None if record else np.empty((kn.REC_COUNT, 0, n_robots, n_members))
+    rec_rows = kn.record_rows(bool(first.followers))   # no link rows without followers
+    records = None if record else np.empty((rec_rows, 0, n_robots, n_members))
     substeps = np.empty(n_robots, dtype=np.int64)
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
@@ -408,13 +409,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
                                                               grid)
         if record and records is None:   # one group of every robot of every member: its record is the record
             records = g_record if _whole(group, n_robots, n_members) else \
-                np.empty((kn.REC_COUNT, n_steps + 1, n_robots, n_members))
+                np.empty((rec_rows, n_steps + 1, n_robots, n_members))
         members = np.array([member for member, _ in group.copies])
         index = np.array([indices for _, indices in group.copies])   # (copies, robots of the graph)
         stats[:, index, members[:, None]] = np.moveaxis(g_stats, 1, 2)
         pair_stats[:, [component_of[indices[0]] for _, indices in group.copies], members] = g_pairs
         if record and records is not g_record:
-            records[:, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
+            _merge_record(records, g_record, index, members)
         substeps[index.ravel()] = plan.max()
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
@@ -435,6 +436,16 @@ def _output_rows(stage_rows: np.ndarray, row_start: np.ndarray) -> np.ndarray:
     if stage_rows.shape[0] == 2 * row_start.size - 1 and np.array_equal(row_start, every_other):
         return stage_rows[::2]
     return stage_rows[row_start]
+
+
+def _merge_record(records: np.ndarray, g_record: np.ndarray, index: np.ndarray, members: np.ndarray) -> None:
+    """Copy a group's record (rows, N+1, robots of the graph, copies) into the run's at robots
+    ``index`` (copies, robots of the graph) of ``members`` (copies,); link rows that the
+    group does not record (a graph without followers, in a run with some) are zeros."""
+    rows = g_record.shape[0]
+    records[:rows, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
+    if records.shape[0] > rows:
+        records[rows:, :, index, members[:, None]] = 0.0
 
 
 def _whole(group: Group, n_robots: int, n_members: int) -> bool:
@@ -485,7 +496,7 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
     n_steps, n_robots = scenario.n_steps, len(scenario.robots)
     stats = np.empty((kn.STAT_COUNT, n_robots, 1))
     pair_stats = np.full((kn.PAIR_COUNT, len(scenario.components()), 1), np.nan)
-    records = np.empty((kn.REC_COUNT, n_steps + 1, n_robots, 1))
+    records = np.empty((kn.record_rows(bool(scenario.followers)), n_steps + 1, n_robots, 1))
     substeps = np.empty(n_robots, dtype=np.int64)
     component_of = {c[0]: k for k, c in enumerate(scenario.components())}
     for item in planned:
@@ -495,14 +506,14 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
         g_states = np.ascontiguousarray(np.stack([states[:, :, c] for c in columns], axis=-1))
         g_helds = np.ascontiguousarray(np.stack([helds[:, :, c] for c in columns], axis=-1))
         g_stats, g_pairs = kn.new_stats(*group.state.shape[1:])
-        g_record = np.empty((kn.REC_COUNT, n_steps + 1, *group.state.shape[1:]))
+        g_record = np.empty((kn.record_rows(group.followers), n_steps + 1, *group.state.shape[1:]))
         score(g_states, group.fields, group.limits, item.rows, item.targets, group.offsets, group.kinds, group.order,
               group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, g_stats, g_pairs, g_record,
               scenario.hold_every, g_helds)
         for b, indices in enumerate(columns):
             stats[:, indices, 0] = g_stats[:, :, b]
             pair_stats[:, component_of[indices[0]], 0] = g_pairs[:, b]
-            records[:, :, indices, 0] = g_record[:, :, :, b]
+            _merge_record(records, g_record[..., b:b + 1], np.array([indices]), np.zeros(1, dtype=np.int64))
             substeps[indices] = item.plan.max()
         _check_diverged(group, g_stats)
     if watchdog is not None:
@@ -516,7 +527,8 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
 def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
     """Refuse, before allocating, a run whose arrays would not fit (an estimate)."""
     samples = scenario.n_steps + 1
-    estimate = 8.0 * robots * ((kn.REC_COUNT * samples if record else 0) + kn.STAT_COUNT + 64)
+    estimate = 8.0 * robots * ((kn.record_rows(bool(scenario.followers)) * samples if record else 0) + kn.STAT_COUNT
+                               + 64)
     substeps = scenario.substeps or 1   # the reference rows at every stage time
     estimate += 8.0 * 10 * 2 * substeps * samples
     if scenario.hold_every and scenario.network is not None and not scenario.network.ideal:
@@ -597,7 +609,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, *windows[0])
     state, branch = start.copy(), group.initial_branches()
     stats, pair_stats = kn.new_stats(n_robots, n_batch)
-    records = np.empty((kn.REC_COUNT, n_steps + 1 if record else 0, n_robots, n_batch))
+    records = np.empty((kn.record_rows(group.followers), n_steps + 1 if record else 0, n_robots, n_batch))
     held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
     step_rate = np.zeros(n_steps + 1)
     outputs = (stats, pair_stats, records, held, step_rate)
@@ -767,7 +779,7 @@ def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bo
         raise SimulationError(f"solve_ivp failed: {solution.message}")
     states = np.ascontiguousarray(solution.y.T.reshape(-1, *shape))
     stats, pair_stats = kn.new_stats(n_robots, n_batch)
-    records = np.empty((kn.REC_COUNT, grid.size if record else 0, n_robots, n_batch))
+    records = np.empty((kn.record_rows(group.followers), grid.size if record else 0, n_robots, n_batch))
     score(states, group.fields, group.limits, _reference_rows(scenario, grid), group.targets(grid), group.offsets,
           group.kinds, group.order, group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, stats,
           pair_stats, records, 0, np.zeros((0, kn.HELD_COUNT, n_robots, n_batch)))
