@@ -289,8 +289,8 @@ def test_a_record_has_link_rows_only_where_the_scenario_has_followers():
     assert alone.record.shape == (kn.REC_ROBOT_COUNT, eight.n_steps + 1, 1, 1)
     assert not alone.outputs("r")[0].any() and not alone.sin_gamma_difference("r").any()   # no link: zeros
     chain = load_scenario(examples.resolve("formation-chain"))
-    mixed = dataclasses.replace(chain, robots=(*chain.robots[:2], eight.robots[0]), duration=2.0, reference=eight.reference,
-                                piconet=False)
+    mixed = dataclasses.replace(chain, robots=(*chain.robots[:2], eight.robots[0]), duration=2.0,
+                                reference=eight.reference, piconet=False)
     both = simulate(mixed)
     assert both.record.shape == (kn.REC_COUNT, mixed.n_steps + 1, 3, 1)
     assert np.array_equal(both.record[:kn.REC_ROBOT_COUNT, :, 2], alone.record[:, :, 0])

@@ -130,16 +130,11 @@ PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_ERR1, REC_ERR2, REC_SINGULAR, REC_SATURATED, REC_OUT1,
  REC_OUT2, REC_RATE1, REC_RATE2, REC_SIN_GAMMA) = range(15)
 REC_COUNT = 15
-# ``record_row`` and ``store_record`` hold a robot's rows in this order, ``link_row`` and
-# ``store_link_record`` a follower's link rows after them; records of graphs without followers
-# have the robot rows only (the link rows would be zeros: a third of a recorded lone root).
+# ``record_row`` and ``store_record`` hold a robot's rows in this order, ``store_link_record`` a
+# follower's link rows after them; records of graphs without followers have the robot rows only
+# (the link rows would be zeros: a third of a recorded lone root). See ``record_rows``.
 REC_ROBOT_COUNT = REC_SATURATED + 1
 REC_LINK_COUNT = REC_COUNT - REC_ROBOT_COUNT
-
-
-def record_rows(followers: bool) -> int:
-    """The rows of a record of a graph with followers (``REC_COUNT``) or without (``REC_ROBOT_COUNT``)."""
-    return REC_COUNT if followers else REC_ROBOT_COUNT
 HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OMEGA = range(6)
 HELD_COUNT = 6
 # What one evaluation at an instant gives per robot (``instant`` array rows).
@@ -153,6 +148,11 @@ assert (HELD_V, HELD_OMEGA, HELD_XI_DOT, HELD_SINGULAR, HELD_SAT_V, HELD_SAT_OME
 # "contract" lets LLVM fuse a*b + c into one FMA instruction (deterministic, and more
 # accurate); no other fast-math relaxations, so NaN/inf semantics and ordering stay IEEE.
 _OPTIONS = dict(cache=True, error_model="numpy", fastmath={"contract"})
+
+
+def record_rows(followers: bool) -> int:
+    """The rows of a record of a graph with followers (``REC_COUNT``) or without (``REC_ROBOT_COUNT``)."""
+    return REC_COUNT if followers else REC_ROBOT_COUNT
 
 
 def new_stats(robots: int, batch: int) -> tuple[np.ndarray, np.ndarray]:

@@ -121,7 +121,8 @@ class SimulationResult:
     kernel's running statistics; ``pair_stats`` (PAIR_COUNT, formations, members) the
     closest pair of each connected formation; ``record`` (rows, N+1, robots, members) when
     recorded (``nonholo.sim.kernel.REC_*``: the robot rows, then the link rows of a follower
-    only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per output step used.
+    only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per
+    output step used.
     ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 

@@ -510,10 +510,10 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
         score(g_states, group.fields, group.limits, item.rows, item.targets, group.offsets, group.kinds, group.order,
               group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, g_stats, g_pairs, g_record,
               scenario.hold_every, g_helds)
+        _merge_record(records, g_record, np.array(columns), np.zeros(len(columns), dtype=np.int64))   # (member 0)
         for b, indices in enumerate(columns):
             stats[:, indices, 0] = g_stats[:, :, b]
             pair_stats[:, component_of[indices[0]], 0] = g_pairs[:, b]
-            _merge_record(records, g_record[..., b:b + 1], np.array([indices]), np.zeros(1, dtype=np.int64))
             substeps[indices] = item.plan.max()
         _check_diverged(group, g_stats)
     if watchdog is not None:
