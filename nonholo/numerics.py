@@ -69,10 +69,27 @@ def sincos(x):
     return s, c
 
 
+_INV_TWO_PI = 1.0 / TWO_PI
+
+
 @njit(inline="always", error_model="numpy")
 def wrap_angle(a):
-    """Angle wrapped to (−π, π] (spec convention), branch-free."""
-    return a - TWO_PI * math.ceil((a - math.pi) / TWO_PI)
+    """Angle wrapped to (−π, π] (spec convention), branch-free: a − 2π⌈(a − π)/2π⌉, the
+    quotient by a multiplication (a division is a long operation that the SIMD loops
+    calling this wait on), then a 2π correction where rounding left the result outside
+    (−π, π]: near odd multiples of π, as the division also did (π + 1 ulp for a = 3π).
+    Floats in (−π, π] are returned unchanged; −π itself (to the float) becomes π."""
+    w = a - TWO_PI * math.ceil((a - math.pi) * _INV_TWO_PI)
+    w = w - TWO_PI if w > math.pi else w
+    return w + TWO_PI if w <= -math.pi else w
+
+
+def array_wrap(angle):
+    """``wrap_angle`` of an array or scalar (numpy, same operations, same results)."""
+    angle = np.asarray(angle, dtype=float)
+    w = angle - TWO_PI * np.ceil((angle - math.pi) * _INV_TWO_PI)
+    w = np.where(w > math.pi, w - TWO_PI, w)
+    return np.where(w <= -math.pi, w + TWO_PI, w)[()]   # (a scalar for a scalar)
 
 
 @njit(inline="always", error_model="numpy")

@@ -23,6 +23,27 @@ def test_wrap_angle_is_in_half_open_interval(angle, wrapped):
     assert wrap_angle(angle) == pytest.approx(wrapped, abs=1e-15)
 
 
+def test_wrap_stays_in_the_half_open_interval_at_multiples_of_pi():
+    """At k·π and the floats beside it (where a − 2πn rounds to just outside (−π, π]: π + 1
+    ulp for a = 3π by the plain formula) the wrapped angle stays in (−π, π], is a + 2πn to
+    rounding, and the compiled scalar and the numpy array version agree bit for bit; an angle
+    already in (−π, π] comes back unchanged."""
+    from nonholo.numerics import array_wrap
+    multiples = np.array([k * math.pi for k in range(-200, 201)])
+    a = np.concatenate([multiples, np.nextafter(multiples, np.inf), np.nextafter(multiples, -np.inf),
+                        np.random.default_rng(3).uniform(-1e3, 1e3, 20_000)])
+    plain = a - 2 * np.pi * np.ceil((a - np.pi) / (2 * np.pi))
+    assert ((plain > math.pi) | (plain <= -math.pi)).any()   # what the correction is for
+    w = array_wrap(a)
+    assert np.all((w > -math.pi) & (w <= math.pi))
+    turns = (a - w) / (2 * np.pi)
+    assert np.max(np.abs(turns - np.round(turns))) < 1e-12
+    assert np.array_equal(w, [wrap_angle(v) for v in a])
+    inside = np.linspace(-math.pi, math.pi, 1001)[1:]
+    assert np.array_equal(array_wrap(inside), inside)
+    assert array_wrap(-math.pi) == math.pi and isinstance(array_wrap(1.0), float)
+
+
 def test_heading_error_sine_and_cosine_are_those_of_the_heading_error():
     """The tracking laws' sin e3, cos e3 by the angle-difference identities are sin and cos of
     e3 = θ_d − θ (any branch: θ anywhere, θ_d in (−π, π]) to an absolute 3e-16 of the exact

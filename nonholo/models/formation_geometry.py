@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from nonholo.numerics import sincos
+from nonholo.numerics import array_wrap, sincos
 
 
 @njit(inline="always", error_model="numpy")
@@ -55,10 +55,7 @@ def separation_bearing(leader, follower, d):
     return np.hypot(px - xl, py - yl), wrap(direction - tl), wrap(direction - tf)
 
 
-def wrap(angle):
-    """Angles wrapped to (−π, π] (the spec convention; arrays or scalars)."""
-    angle = np.asarray(angle, dtype=float)
-    return angle - 2 * np.pi * np.ceil((angle - np.pi) / (2 * np.pi))
+wrap = array_wrap   # angles wrapped to (−π, π], the spec convention (arrays or scalars)
 
 
 def place_follower(leader, separation, bearing, theta_f, d):
