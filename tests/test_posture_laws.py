@@ -142,3 +142,17 @@ def test_posture_formations_are_integrated_from_the_goal_and_recorded_in_the_wor
                                                                              WORLD_DISTANCE))
     hover = simulate(dataclasses.replace(polar, robots=(faulty,), duration=60.0)).posture_metrics("robot")
     assert hover["position_error"]["final"] > 1e-4
+
+
+def test_polar_direction_to_the_goal_is_in_the_half_open_interval_on_its_branch_cut():
+    """Spec §5.2: φ = atan2(−y, −x) in (−π, π]. Straight ahead of the goal on its x-axis
+    (goal-frame y = +0.0 or −0.0, facing it) φ is +π, not atan2's −π for y = +0.0, so ω
+    turns the robot the same way from both zeros: ω(0) = k2 μ + k1 cos μ (μ + k3 φ) with
+    μ = wrap(φ − θ) = 0, that is k1 k3 π > 0."""
+    from nonholo.control.posture import polar_command
+    config = posture_controller("polar")
+    gains = config.controller.gain_tuple(**config.gains, goal_x=0.0, goal_y=0.0, goal_theta=0.0)
+    expected = gains.k1 * gains.k3 * math.pi
+    for gy in (0.0, -0.0):
+        v, omega, _, _ = polar_command.py_func(5.0, 5.0, gy, math.pi, gains)
+        assert omega == pytest.approx(expected, rel=1e-15) and v == pytest.approx(gains.k1 * 5.0, rel=1e-15)

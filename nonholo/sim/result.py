@@ -298,7 +298,8 @@ class SimulationResult:
                 else:
                     band = SETTLING_BAND * abs(segment[2] - segment[1])
                     # the output against its new target, z − z_d,end = (z_d(t) − z_d,end) − (z_d − z): a
-                    # step's error, and a ramp's distance to where it goes (it settles after its ramp)
+                    # step's error, and a ramp's distance to where it goes (within the band from 0.86
+                    # of the smoothstep on, for an exact follower: settling before the ramp's end)
                     away = targets[:, output] - segment[2] - errors[output]
                     entry[f"{name}_settling_time"] = settling_time(self.t, away, change.at, band, until)
                     entry[f"{name}_target"] = segment[2]
