@@ -105,6 +105,19 @@ def test_vanishing_speed_is_found_between_grid_points():
     references.eight().check_speed(0.0, 80 * np.pi)  # min speed 0.174 m/s: feasible
 
 
+@pytest.mark.parametrize("x, y, zero", [("(t+1) - sin(t+1)", "1 - cos(t+1)", 2 * np.pi - 1),   # cycloid cusp
+                                        ("(t-5.283185)^2", "(t-5.283185)^3/10", 5.283185),
+                                        ("(t-4.123456789)^2", "(t-4.123456789)^3/10", 4.123456789)])
+def test_a_speed_that_vanishes_linearly_between_grid_points_is_found(x, y, zero):
+    """|ṗ_d| ≈ |p̈_d| |t − t*| near a rest point: the minimizer's √eps·|t| in time left a
+    minimum ~1e-8 of p̈_d, above the 1e-9 acceptance, and the cusp was missed; the tangent
+    line's closest approach to zero finds it to the last digits."""
+    found = references.expression(x, y).vanishing_speed_times(0.0, 10.0)
+    assert len(found) == 1 and found[0] == pytest.approx(zero, abs=1e-12)
+    near_miss = references.expression("(t-5.0000123)^2", "1e-6*t")   # min speed 1e-6, 1e-7 of the peak
+    assert near_miss.vanishing_speed_times(0.0, 10.0) == []
+
+
 def test_table_rows_are_the_feedforward_formulas_bit_for_bit():
     """``table_rows`` (one compiled pass) gives the numbers of the spec's formulas written as
     numpy array expressions, to the bit: speeds that vanish (ω_d = 0 there), non-finite

@@ -2,6 +2,7 @@
 times, the feedforward table the simulator consumes, and a feasibility check."""
 from __future__ import annotations
 
+import math
 import numbers
 from abc import ABC, abstractmethod
 
@@ -67,7 +68,10 @@ class Reference(ABC):
 
         The speed is sampled on a fine grid; every local minimum below 1e-3 of the
         peak is refined with a bounded scalar minimization, so that zeros between grid
-        points (cusps, rest points) are found too.
+        points (cusps, rest points) are found too. The minimization finds the time only to
+        about √eps·|t|, and speed generically vanishes linearly (ṗ_d ≈ p̈_d (t − t*)), so
+        its minimum value can stay ~1e-8 of p̈_d above zero: the velocity's closest approach
+        to zero on its tangent line there, |ṗ × p̈| / |p̈| at time t − ṗ·p̈ / |p̈|², decides.
         """
         from scipy.optimize import minimize_scalar   # here: scipy.optimize costs every command 0.2 s to import
 
@@ -83,6 +87,13 @@ class Reference(ABC):
             best = minimize_scalar(lambda s: float(self.speed(s)[0]), bounds=(lo, hi), method="bounded",
                                    options={"xatol": 1e-12 * max(1.0, abs(hi))})
             t_min, s_min = (float(best.x), float(best.fun)) if best.fun < speed[i] else (float(t[i]), float(speed[i]))
+            _, _, vx, vy, ax, ay = self.flat_outputs(np.array([t_min]))[:, 0]
+            accel_sq = ax * ax + ay * ay
+            if accel_sq > 0.0:   # the tangent line's closest approach, if it lies in the bracket
+                t_line = t_min - (vx * ax + vy * ay) / accel_sq
+                s_line = abs(vx * ay - vy * ax) / math.sqrt(accel_sq)
+                if lo <= t_line <= hi and s_line < s_min:
+                    t_min, s_min = float(t_line), float(s_line)
             if s_min <= 1e-9 * scale and not any(abs(t_min - z) < 1e-6 for z in zeros):
                 zeros.append(t_min)
         return zeros
