@@ -107,6 +107,26 @@ def test_stiff_cascaded_law_is_substepped():
     assert result.substeps[0] >= 5 and math.isfinite(result.metrics.error_mean[0])
 
 
+def test_a_tracking_transient_is_sub_stepped_from_the_rates_it_meets():
+    """Dynamic feedback from a far start with a small ξ(0): ω reaches 38 rad/s, which the
+    prior plan (gains and reference) does not know. One RK4 step per dt drives ξ through 0
+    (h·ω = 2.5 at the second step) and ends on the wrong branch, driving backward; planned
+    from the rates met (h·|ω| ≤ 0.5 for a tracking law), the run is the converged one, alone
+    and in a batch of other starts."""
+    robot = Robot("r", controller("dynamic-feedback", kp=1.0, kd=0.7, xi0=0.05), (18.0, -6.0, -0.8579290802496002))
+    scenario = Scenario(references.circle(), [robot], duration=10.0, dt=0.01)
+    exact = simulate(dataclasses.replace(scenario, method="solve_ivp"))
+    coarse = simulate(dataclasses.replace(scenario, substeps=1))
+    assert coarse.xi[0, 1] < 0 < exact.xi[0, 1] and abs(coarse.metrics.heading_final[0]) > 3.0
+    others = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(float(x), 0.0, 0.0)),))
+              for x in range(4, 10)]
+    for planned in (simulate(scenario), simulate([scenario, *others])):
+        assert planned.substeps.max() > 1 and (planned.xi[0] > 0).all()
+        assert np.abs(planned.record[[kn.REC_X, kn.REC_Y], :, 0, 0] - exact.record[[kn.REC_X, kn.REC_Y], :, 0, 0]
+                      ).max() < 1e-5
+        assert np.ravel(planned.metrics.error_mean)[0] == pytest.approx(exact.metrics.error_mean[0], rel=1e-6)
+
+
 def test_reference_with_vanishing_speed_is_rejected_for_laws_that_need_v_d():
     ref = references.waypoints([[0, 0, 0], [5, 2, 1], [10, 4, 0]], boundary="clamped")
     with pytest.raises(InfeasibleReferenceError, match=r"vanishes at t = 0 s.*kanayama"):

@@ -35,19 +35,26 @@ def assert_same(one, many, rtol=1e-12):
 
 
 @pytest.mark.parametrize("name", sorted(CONTROLLERS))
-def test_alone_equals_the_batch_loops_for_every_tracking_law(name):
-    # actuator limits that bind at the start: saturation counts and peaks are compared too
+@pytest.mark.parametrize("substeps", [None, 4])
+def test_alone_equals_the_batch_loops_for_every_tracking_law(name, substeps):
+    # actuator limits that bind at the start: saturation counts and peaks are compared too.
+    # Planned sub-steps (None) come from the rates the copies meet, one plan per batch:
+    # identical copies, so that the batch plans as the single run does; given ones, copies
+    # from different starts.
     robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
-    one, many = runs(Scenario(references.eight(), [robot], duration=20.0, dt=0.01))
+    one, many = runs(Scenario(references.eight(), [robot], duration=20.0, dt=0.01, substeps=substeps),
+                     spread=0.0 if substeps is None else 1.0)
     assert one.stats[kn.SAT_V, 0, 0] + one.stats[kn.SAT_W, 0, 0] > 0   # the limits acted
+    assert np.array_equal(one.substeps, many.substeps)
     assert_same(one, many)
 
 
 def test_alone_equals_the_batch_loops_through_singular_passages():
     # dynamic feedback from rest: ξ starts at 0, the guarded singular region is entered
     robot = Robot("r", controller("dynamic-feedback", xi0=0.0), (0.5, -0.5, 0.3))
-    one, many = runs(Scenario(references.eight(), [robot], duration=10.0, dt=0.01))
+    one, many = runs(Scenario(references.eight(), [robot], duration=10.0, dt=0.01), spread=0.0)
     assert one.stats[kn.SINGULAR, 0, 0] > 0 and np.isfinite(one.stats[kn.FIRST_SINGULAR, 0, 0])
+    assert np.array_equal(one.substeps, many.substeps)
     assert_same(one, many)
 
 

@@ -104,7 +104,7 @@ class Reference(ABC):
             raise InfeasibleReferenceError(f"the reference does not move on [{t0:g}, {t1:g}] s: {who} needs v_d != 0")
         zeros = self.vanishing_speed_times(t0, t1)
         if zeros:
-            shown = ", ".join(f"t = {z:.6g} s" for z in zeros[:5])
+            shown = ", ".join(f"t = {round(z, 9):.6g} s" for z in zeros[:5])   # (to the ns: 0, not 7e-16)
             more = f" and {len(zeros) - 5} more" if len(zeros) > 5 else ""
             raise InfeasibleReferenceError(
                 f"reference speed |dp_d/dt| vanishes at {shown}{more}: the feedforward theta_d, omega_d is "

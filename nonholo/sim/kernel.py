@@ -120,11 +120,15 @@ assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK,
 # (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
 # LLVM's run-time overlap checks (tens of comparisons) at every step.
 ALONE_BELOW = 4
+# Which rates a lone root's time loop measures (``run_alone``): none, every RK4 stage's, or
+# the first stage's of each sub-step.
+MEASURE_NONE, MEASURE_STAGES, MEASURE_FIRST_STAGE = 0, 1, 2
 # Batches of lone roots under continuous-time control run this many copies at a time through
 # the whole time loop (``Kernel.roots``): their state and statistics stay in the core's caches.
 ROOTS_CHUNK = 128
 KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
 SLOPE_COUNT = 12   # what ``roots`` keeps of a copy's RK4 step between its stages: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇)
+RATE_ROW = SLOPE_COUNT   # and, in the row after them, its first stage's rate (``largest_rate``)
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_ERR1, REC_ERR2, REC_SINGULAR, REC_SATURATED, REC_OUT1,
@@ -324,6 +328,20 @@ def stage_rate(stage, xi_speed):
 
 
 @njit(inline="always", **_OPTIONS)
+def largest_rate(slope, n):
+    """The largest of the first n rates in row ``RATE_ROW`` of ``slope`` (``stage_rate``, not
+    negative): a maximum of their bit patterns as integers, which order non-negative floats
+    as their values do (NaN above inf) and which LLVM vectorizes; a float maximum carried
+    from copy to copy it may not reorder (NaN), and the loop holding it ran 2.5x slower."""
+    bits = slope[RATE_ROW].view(np.int64)
+    largest = bits[0]
+    for i in range(1, n):
+        largest = max(largest, bits[i])
+    bits[0] = largest
+    return slope[RATE_ROW, 0]
+
+
+@njit(inline="always", **_OPTIONS)
 def robot_stats(stats, r, b):
     """A robot's running statistics, rows 0 … ``ROBOT_STATS`` − 1 (E_MEAN … SAT_ANY), as
     a tuple (the rows after them are kept for formations only)."""
@@ -422,8 +440,10 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
     ``given`` states (N+1, 4, R, B), not empty, it scores them instead (sub-steps 0).
 
     ``root`` is ``(address, posture, measuring)``: the law's entry
-    (``nonholo.sim.lawcall.law_entry``), 1 for a posture law, and 1 to measure the turn rates
-    (``step_rate``: a posture law's start-up is not known in advance). The law is called
+    (``nonholo.sim.lawcall.law_entry``), 1 for a posture law, and which rates go to
+    ``step_rate``: ``MEASURE_STAGES`` every stage's (a posture law's start-up is not known in
+    advance), ``MEASURE_FIRST_STAGE`` each sub-step's first stage's (a tracking law's
+    transients: far starts, ξ near 0; as ``roots`` measures them). The law is called
     through its address, so this function is compiled once for every law (a single run pays
     a few nanoseconds per law evaluation for it: about 5 % of its time)."""
     address, posture, measuring = root
@@ -453,14 +473,16 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
                 if j == 0:
                     v, omega, singular, sat_v, sat_w = s1[5], s1[6], s1[7], s1[8], s1[9]
                 x, y, theta, xi = new
-                if measuring != 0:
+                if measuring == MEASURE_STAGES:
                     step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
                                        stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
+                elif measuring == MEASURE_FIRST_STAGE:
+                    step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed))
         err1, err2 = root_errors(posture != 0, fields, r, b, x0, y0, theta0, ref)
         sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
         if recording:
             store_record(record, k, r, b, record_row(x0, y0, theta0, xi0, v, omega, err1, err2, singular, sat_v, sat_w))
-        if measuring != 0:
+        if measuring == MEASURE_STAGES:
             step_rate[k] = max(step_rate[k], abs(omega))
     state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
     store_stats(stats, r, b, sample)
@@ -473,9 +495,9 @@ def integrate_alone(root, state, fields, limits, rows, row_start, substeps, targ
     """``integrate`` (same arguments after ``root``) for lone roots under continuous-time
     control, one robot at a time (``run_alone``): the faster for a few copies
     (``ALONE_BELOW``). ``root`` (2,) int64: the law's (entry address, posture) (``LoneRoot``
-    binds it); a posture law's turn rates are measured."""
+    binds it); its turn rates are measured (``run_alone``)."""
     no_states = np.empty((0, 4, state.shape[1], state.shape[2]))
-    law = (root[0], root[1], root[1])
+    law = (root[0], root[1], MEASURE_STAGES if root[1] else MEASURE_FIRST_STAGE)
     for r in range(state.shape[1]):
         for b in range(state.shape[2]):
             run_alone(law, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop,
@@ -588,8 +610,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     n_a, n_b = len(gains_a._fields), len(gains_b._fields)
     posture_a = gains_a._fields[:3] == GOAL_FIELDS
     posture_b = gains_b._fields[:3] == GOAL_FIELDS
-    # Turn rates not known in advance (followers, posture laws' start-up) are measured.
+    # Turn rates not known in advance are measured: at every stage for followers and posture
+    # laws' start-up, at each sub-step's first stage for a tracking law's transients (far
+    # starts, ξ near 0) in ``roots``, its statistics loop (see ``run_alone``).
     measuring = followers or posture_a or posture_b
+    first_stage_rates = not measuring
     two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
     root_rk4 = root_rk4_exact if followers else root_rk4_fused
     command = root_command_exact if followers else root_command
@@ -927,7 +952,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                   n_steps, stats, record, step_rate, sample, slope):
         """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned). An RK4 step runs
         stage by stage, one loop over the copies each, ``slope`` keeping each copy's k1, k2,
-        k3 (rows 0–3, 4–7, 8–11: ẋ, ẏ, θ̇, ξ̇) for the next stages: the body of one stage is
+        k3 (rows 0–3, 4–7, 8–11: ẋ, ẏ, θ̇, ξ̇) for the next stages, and its first stage's
+        rate (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
         short enough for the processor to overlap the dependent chains of successive copies,
         which a body of all four stages (longer than its reorder window) was not. The same
         operations as ``root_rk4``, in the same order."""
@@ -962,6 +988,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
+                        slope[RATE_ROW, i] = stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed)
+                    peak = largest_rate(slope, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
                     for b in range(c0, c1):
                         i = b - c0
@@ -970,8 +998,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                                                                                             theta, xi, r0)
                         slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                        if measuring:
-                            peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                        if measuring or first_stage_rates:
+                            slope[RATE_ROW, i] = stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed)
+                    if measuring or first_stage_rates:
+                        peak = largest_rate(slope, np.int64(c1 - c0))
                 # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
                 # variables (one loop over both stages, or a helper taking them) LLVM cannot tell
                 # the rows read from the rows written, and the loop ran 2.7x slower.
@@ -1003,7 +1033,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], slope[7, i], slope[11, i], dxi)
                     if measuring:
                         peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                if measuring:
+                if measuring or first_stage_rates:
                     step_rate[k] = max(step_rate[k], peak)
                 if j == 0 and not inline_sample:
                     add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, step_rate)
@@ -1017,7 +1047,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         ``run_roots``'s code a second time (2 s of a fresh install's compiling per law)."""
         n_batch = state.shape[2]
         sample = np.empty((KEPT_COUNT, min(ROOTS_CHUNK, n_batch)))
-        slope = np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch)))
+        slope = np.empty((SLOPE_COUNT + 1, min(ROOTS_CHUNK, n_batch)))
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):

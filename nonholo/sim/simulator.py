@@ -5,8 +5,9 @@ arrays of ``nonholo.sim.kernel`` and integrates them with the compiled RK4, or w
 **Groups.** A scenario's robots split into connected formations (a lone robot is one). The
 formations that share a structure (graph, laws, targets) and a sub-step plan are integrated
 together as one batch, copies along the kernel's batch axis: 10 000 lone robots under one
-law are one group of 10 000 copies of a one-robot graph. So a robot's result never depends
-on the other formations it is simulated with.
+law are one group of 10 000 copies of a one-robot graph. So a robot's result depends on the
+other formations it is simulated with only through the sub-steps planned from the rates the
+group meets (below): where one copy needs more, all get them, never fewer than their own.
 
 **The sub-step rule.** RK4 sub-steps per output step are given (``substeps``) or planned so
 that h·λ ≤ ``STABLE_STEP_FACTOR`` for every rate λ known in advance — each root law's
@@ -15,7 +16,12 @@ rate, the followers' gains — with the first ``STARTUP_TIME_CONSTANTS``/λ seco
 law refined ``STARTUP_REFINEMENT``-fold (its start-up transient), and so that h·ω ≤
 ``MEASURED_STEP_FACTOR`` for the rates measured while running where they cannot be known in
 advance — a formation's and a posture law's turn rates (|ω|, and |ξ̇/ξ| of speed
-compensators). Those are met while running: the horizon is integrated in ``PLAN_WINDOWS``
+compensators) — and h·ω ≤ ``STABLE_STEP_FACTOR`` for a tracking law's (at the first stage of
+each sub-step: a far start, or ξ of dynamic feedback near 0, turns far faster than the
+reference; one RK4 step per dt at h·ω = 2.5 drove ξ through 0 and the robot on backward).
+A tracking group runs its horizon at once and again, with more sub-steps where its rates
+asked for them, only if they did. Formations' and posture laws' rates are met while
+running: the horizon is integrated in ``PLAN_WINDOWS``
 windows of output steps (``plan_windows``), and a window whose own rates ask for more
 sub-steps than it ran is run again from its start (state, bearings, statistics and held
 commands put back) with more — at most ``PLAN_GROWTH`` times as many per step at each attempt,
@@ -133,10 +139,11 @@ def prior_plan(scenario: Scenario, rate: float) -> np.ndarray:
     return plan
 
 
-def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int = 0, k1: int | None = None) -> np.ndarray:
-    """Sub-steps of output steps [k0, k1) (default: all) so that h·rate ≤ MEASURED_STEP_FACTOR
-    for the rates met in each output step, each step also covering its neighbours' (a
-    transient may start just after a sample)."""
+def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int = 0, k1: int | None = None,
+                  factor: float = MEASURED_STEP_FACTOR) -> np.ndarray:
+    """Sub-steps of output steps [k0, k1) (default: all) so that h·rate ≤ ``factor`` for the
+    rates met in each output step, each step also covering its neighbours' (a transient may
+    start just after a sample)."""
     k1 = prior.size if k1 is None else k1
     low = max(k0 - 1, 0)
     rate = step_rate[low:k1 + 1]
@@ -146,7 +153,7 @@ def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int =
         widened = np.maximum(widened, rate[:k1 - k0])
     else:
         widened[1:] = np.maximum(widened[1:], rate[:k1 - k0 - 1])
-    needed = np.ceil(widened * dt / MEASURED_STEP_FACTOR)
+    needed = np.ceil(widened * dt / factor)
     needed = np.clip(np.where(np.isfinite(needed), needed, MAX_SUBSTEPS), 1, MAX_SUBSTEPS).astype(np.int64)
     return np.maximum(needed, prior[k0:k1])
 
@@ -164,8 +171,11 @@ class Group:
         local = {robot.name: j for j, robot in enumerate(robots)}
         n_robots, n_batch = len(robots), len(copies)
         self.followers = any(isinstance(r, Follower) for r in robots)
-        # Plans from measured rates where they are not known in advance (see the docstring).
+        # Plans from measured rates where they are not known in advance (see the docstring):
+        # formations' and posture laws' to MEASURED_STEP_FACTOR, tracking laws' (under
+        # continuous-time control) to STABLE_STEP_FACTOR, as their rates known in advance.
         self.measured = self.followers or any(isinstance(r, Robot) and r.posture for r in robots)
+        self.rate_factor = MEASURED_STEP_FACTOR if self.measured else STABLE_STEP_FACTOR
         self.laws = laws
         law_functions = [law for law, _ in laws]
         self.kinds = np.array([kn.ROOT_A + law_functions.index(r.controller.law) if isinstance(r, Robot) else
@@ -594,13 +604,18 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
         for j in roots:
             fields[:2, j] -= origin
         start[:2] -= origin[:, None, :]
-    attempts = PLAN_ATTEMPTS if group.measured and scenario.substeps is None else 1
+    # (tracking roots under sampled-data control hold their commands: no law's rate to meet)
+    measured = group.measured or scenario.hold_every == 0
+    attempts = PLAN_ATTEMPTS if measured and scenario.substeps is None else 1
     n_robots, n_batch = group.state.shape[1:]
     integrate = kernel.integrator(scenario.hold_every != 0, n_batch)
     work = float(plan.sum()) * n_robots * n_batch
     show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
     whole = linked(group)   # the link model runs the whole horizon at once (nonholo.sim.linkstep)
-    windows = plan_windows(n_steps) if (attempts > 1 or show) and not whole else [(0, n_steps)]
+    # Tracking roots run the horizon at once, again only in the rare run that a transient made
+    # under-resolved: windows cost a single run about 1 ms, and their rates are mostly met.
+    windowed = (group.measured and attempts > 1) or show
+    windows = plan_windows(n_steps) if windowed and not whole else [(0, n_steps)]
 
     # The first tables before the outputs: in this order glibc's malloc keeps reusing the same
     # memory from one run to the next (the other way round, a Test 1 run faulted in 2 200
@@ -633,9 +648,9 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
                 window = slice(k0, k1)
-                if step_rate[max(k0 - 1, 0):k1 + 1].max() * dt / MEASURED_STEP_FACTOR <= plan[window].min():
+                if step_rate[max(k0 - 1, 0):k1 + 1].max() * dt / group.rate_factor <= plan[window].min():
                     break   # (every step has the sub-steps its rates ask for: the common case, quickly)
-                needed = measured_plan(step_rate, group.prior, dt, k0, k1)   # (step_rate[k1]: 0, not run yet)
+                needed = measured_plan(step_rate, group.prior, dt, k0, k1, group.rate_factor)   # (step_rate[k1]: 0)
                 short = needed > plan[window]
                 if not short.any():
                     break
