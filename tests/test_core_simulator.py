@@ -127,6 +127,14 @@ def test_a_tracking_transient_is_sub_stepped_from_the_rates_it_meets():
         assert np.ravel(planned.metrics.error_mean)[0] == pytest.approx(exact.metrics.error_mean[0], rel=1e-6)
 
 
+def test_the_control_period_reported_is_the_one_held():
+    # control_period is taken to within 1e-6 of a multiple of dt: the JSON says what ran
+    eight = Scenario(references.eight(), [Robot("r", controller("nonlinear"))], duration=1.0, dt=0.01)
+    for given, held in ((0.05000001, 0.05), (0.03, 0.03)):
+        result = simulate(dataclasses.replace(eight, control_period=given))
+        assert result.to_dict()["simulation"]["control_period"] == held
+
+
 def test_reference_with_vanishing_speed_is_rejected_for_laws_that_need_v_d():
     ref = references.waypoints([[0, 0, 0], [5, 2, 1], [10, 4, 0]], boundary="clamped")
     with pytest.raises(InfeasibleReferenceError, match=r"vanishes at t = 0 s.*kanayama"):

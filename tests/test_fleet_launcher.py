@@ -144,3 +144,16 @@ def test_bench_fleet_failure_is_one_line_exit_1(monkeypatch, capsys):
 def test_bench_fleet_bad_rate_is_one_line_exit_2(capsys):
     assert nonholo.cli.main(["bench-fleet", "--rates", "0"]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_a_fleet_too_large_to_keep_is_refused_in_one_line_before_it_plans(tmp_path, capsys):
+    """Two robots for 2e6 s at dt = 0.02 s: the states a fleet keeps would need ~38 GiB. As
+    ``nonholo run`` does, the fleet refuses it in one line (exit 2), before planning (which
+    would allocate a table of the whole horizon and die with a MemoryError traceback)."""
+    from view_fleets import chain_toml
+
+    path = tmp_path / "long.toml"
+    path.write_text(chain_toml(2e6, followers=1))
+    assert nonholo.cli.main(["fleet", str(path), "--transport", "inproc", "--quiet", "--json"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "would need" in err and "Traceback" not in err

@@ -219,6 +219,7 @@ def test_statuses_are_checked(change):
      "--observe"),
     (["robot", "chain.toml", "--name", "f1", "--keys", "fleet.keys", "--observe", "x"], "--observe"),
     (["robot", "chain.toml", "--name", "f1", "--keys", "fleet.keys", "--speed", "0"], "--speed"),
+    (["fleet", "chain.toml", "--speed", "1e-300", "--transport", "inproc"], "--speed"),   # would never end
 ])
 def test_bad_watching_options_are_one_line_exit_2(arguments, option, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)

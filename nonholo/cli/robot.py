@@ -108,12 +108,16 @@ def handle(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# The slowest pace --speed takes: a thousandth of wall time (a run of 1e-300 would never end).
+MIN_SPEED = 1e-3
+
+
 def check_watching(args: argparse.Namespace) -> None:
-    """--observe HOST:PORT and --speed X (positive), or NonholoInputError naming the option."""
+    """--observe HOST:PORT and --speed X (>= MIN_SPEED), or NonholoInputError naming the option."""
     from nonholo.errors import NonholoInputError
     from nonholo.fleet.mesh import split_address
 
     if args.observe is not None:
         split_address(args.observe, "--observe")
-    if args.speed is not None and not 0 < args.speed < float("inf"):
-        raise NonholoInputError(f"--speed must be a positive number, got {args.speed}")
+    if args.speed is not None and not MIN_SPEED <= args.speed < float("inf"):
+        raise NonholoInputError(f"--speed must be a number >= {MIN_SPEED:g} (times wall time), got {args.speed:g}")

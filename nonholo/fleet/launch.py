@@ -210,7 +210,7 @@ def network_report(reports: list[dict], transport: str, mode: str, elapsed: floa
                 "age_s": quantiles(receiver["ages"].get(name, []))}
     instants = len(range(0, scenario.n_steps + 1, scenario.hold_every))
     loop = max((r["loop_s"] for r in reports), default=0.0)   # the slowest robot's control loop
-    return {"transport": transport, "mode": mode, "control_period": scenario.control_period,
+    return {"transport": transport, "mode": mode, "control_period": scenario.held_period,
             "elapsed_s": elapsed, "control_steps": instants, "loop_s": loop,
             "control_steps_per_s": instants / loop if loop > 0 else None, "links": links,
             "robots": {r["name"]: {"parents": r["parents"], "children": r["children"], "loop_s": r["loop_s"],

@@ -344,7 +344,7 @@ class SimulationResult:
         """JSON-ready summary of one scenario of the batch."""
         scenario = self.scenarios[member]
         simulation = {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
-                      "method": scenario.method, "control_period": scenario.control_period,
+                      "method": scenario.method, "control_period": scenario.held_period,
                       "max_substeps": int(self.substeps.max()), "elapsed_s": self.elapsed_s,
                       "batch": len(self.scenarios)}
         if scenario.network is not None and not scenario.network.ideal:

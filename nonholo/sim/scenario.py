@@ -339,6 +339,12 @@ class Scenario:
         return 0 if self.control_period is None else round(self.control_period / self.dt)
 
     @property
+    def held_period(self) -> float | None:
+        """The period commands are held for: ``hold_every``·dt (``control_period`` is taken to
+        within 1e-6 of a multiple of dt), to 12 digits (3 × 0.1 is 0.3), None for continuous-time laws."""
+        return None if self.control_period is None else float(f"{self.hold_every * self.dt:.12g}")
+
+    @property
     def names(self) -> tuple[str, ...]:
         return tuple(r.name for r in self.robots)
 

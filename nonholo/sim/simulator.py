@@ -482,6 +482,7 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
     if scenario.hold_every == 0 or scenario.method != "rk4":
         raise NonholoInputError("a distributed run needs sampled-data control: set control_period "
                                 "(a multiple of dt) and method = \"rk4\"")
+    _check_size(scenario, len(scenario.robots), True)   # (a fleet keeps every robot's states)
     grid = np.arange(scenario.n_steps + 1) * scenario.dt
     v_peak, omega_peak = _reference_survey(scenario)
     v_d0 = float(scenario.reference.table(grid[:1])[0, REF_V]) if scenario.reference is not None else 0.0
