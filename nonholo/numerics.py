@@ -78,8 +78,10 @@ def wrap_angle(a):
     quotient by a multiplication (a division is a long operation that the SIMD loops
     calling this wait on), then a 2π correction where rounding left the result outside
     (−π, π]: near odd multiples of π, as the division also did (π + 1 ulp for a = 3π).
-    Floats in (−π, π] are returned unchanged; −π itself (to the float) becomes π."""
-    w = a - TWO_PI * math.ceil((a - math.pi) * _INV_TWO_PI)
+    Floats in (−π, π] are returned unchanged (−0.0 as +0.0); −π itself (to the float)
+    becomes π. ``np.ceil``, a float, not ``math.ceil``, which numba makes an int64: a
+    conversion in the SIMD loops, and an overflow beyond 9.2e18."""
+    w = a - TWO_PI * np.ceil((a - math.pi) * _INV_TWO_PI)
     w = w - TWO_PI if w > math.pi else w
     return w + TWO_PI if w <= -math.pi else w
 
@@ -87,7 +89,8 @@ def wrap_angle(a):
 def array_wrap(angle):
     """``wrap_angle`` of an array or scalar (numpy, same operations, same results)."""
     angle = np.asarray(angle, dtype=float)
-    w = angle - TWO_PI * np.ceil((angle - math.pi) * _INV_TWO_PI)
+    with np.errstate(invalid="ignore"):   # ±inf: NaN, as the compiled one gives, without a warning
+        w = angle - TWO_PI * np.ceil((angle - math.pi) * _INV_TWO_PI)
     w = np.where(w > math.pi, w - TWO_PI, w)
     return np.where(w <= -math.pi, w + TWO_PI, w)[()]   # (a scalar for a scalar)
 

@@ -39,6 +39,10 @@ def test_wrap_stays_in_the_half_open_interval_at_multiples_of_pi():
     turns = (a - w) / (2 * np.pi)
     assert np.max(np.abs(turns - np.round(turns))) < 1e-12
     assert np.array_equal(w, [wrap_angle(v) for v in a])
+    extremes = np.array([1e20, -1e20, 1e300, np.inf, -np.inf, np.nan, -0.0])   # beyond int64, not finite, -0
+    scalar = np.array([wrap_angle(v) for v in extremes])
+    assert np.array_equal(array_wrap(extremes), scalar, equal_nan=True)
+    assert np.array_equal(np.signbit(array_wrap(extremes)), np.signbit(scalar))
     inside = np.linspace(-math.pi, math.pi, 1001)[1:]
     assert np.array_equal(array_wrap(inside), inside)
     assert array_wrap(-math.pi) == math.pi and isinstance(array_wrap(1.0), float)

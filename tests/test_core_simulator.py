@@ -113,18 +113,41 @@ def test_a_tracking_transient_is_sub_stepped_from_the_rates_it_meets():
     (h·ω = 2.5 at the second step) and ends on the wrong branch, driving backward; planned
     from the rates met (h·|ω| ≤ 0.5 for a tracking law), the run is the converged one, alone
     and in a batch of other starts."""
-    robot = Robot("r", controller("dynamic-feedback", kp=1.0, kd=0.7, xi0=0.05), (18.0, -6.0, -0.8579290802496002))
-    scenario = Scenario(references.circle(), [robot], duration=10.0, dt=0.01)
+    scenario = _transient()
     exact = simulate(dataclasses.replace(scenario, method="solve_ivp"))
     coarse = simulate(dataclasses.replace(scenario, substeps=1))
     assert coarse.xi[0, 1] < 0 < exact.xi[0, 1] and abs(coarse.metrics.heading_final[0]) > 3.0
+    robot = scenario.robots[0]
     others = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(float(x), 0.0, 0.0)),))
               for x in range(4, 10)]
-    for planned in (simulate(scenario), simulate([scenario, *others])):
-        assert planned.substeps.max() > 1 and (planned.xi[0] > 0).all()
-        assert np.abs(planned.record[[kn.REC_X, kn.REC_Y], :, 0, 0] - exact.record[[kn.REC_X, kn.REC_Y], :, 0, 0]
-                      ).max() < 1e-5
-        assert np.ravel(planned.metrics.error_mean)[0] == pytest.approx(exact.metrics.error_mean[0], rel=1e-6)
+    # one copy that diverges (ω overflows, then NaN): its rates must not hide the others' in
+    # its chunk of the batch loops; the fast copy comes last
+    diverging = dataclasses.replace(scenario, robots=(Robot("r", controller("dynamic-feedback", xi0=0.0,
+                                                                             xi_min=1e-300), robot.start),))
+    runs = ((simulate(scenario), 0), (simulate([*others, scenario]), -1),
+            (simulate([diverging, *others, scenario], on_divergence="report"), -1))
+    for planned, copy in runs:
+        assert planned.substeps.max() > 1 and (planned.record[kn.REC_XI, :, 0, copy] > 0).all()
+        xy = planned.record[[kn.REC_X, kn.REC_Y], :, 0, copy]
+        assert np.abs(xy - exact.record[[kn.REC_X, kn.REC_Y], :, 0, 0]).max() < 1e-5
+        assert np.ravel(planned.metrics.error_mean)[copy] == pytest.approx(exact.metrics.error_mean[0], rel=1e-6)
+    assert not np.isfinite(runs[2][0].stats[kn.E_MEAN, 0, 0])
+
+
+def _transient() -> Scenario:
+    """Dynamic feedback from a far start with a small ξ(0): ω reaches 38 rad/s (see below)."""
+    robot = Robot("r", controller("dynamic-feedback", kp=1.0, kd=0.7, xi0=0.05), (18.0, -6.0, -0.8579290802496002))
+    return Scenario(references.circle(), [robot], duration=10.0, dt=0.01)
+
+
+def test_a_tracking_robot_from_rest_is_planned_in_a_few_runs():
+    """ξ(0) = 0: ξ grows as ξ̇·t, so |ξ̇/ξ| ≈ 1/t at a sub-step's first stage whatever the
+    step; a tracking robot's plan follows |ω| (guarded by ξ_min), which more sub-steps
+    resolve, not |ξ̇/ξ|, which no plan would meet (every run then asked for 4x more, up to
+    1 000 sub-steps everywhere)."""
+    robot = Robot("r", controller("dynamic-feedback", xi0=0.0), (0.5, -0.5, 0.3))
+    result = simulate(Scenario(references.eight(), [robot], duration=10.0, dt=0.01))
+    assert result.substeps.max() < 100   # (its largest per step: 14 where ξ passes ξ_min)
 
 
 def test_the_control_period_reported_is_the_one_held():
@@ -197,6 +220,8 @@ def _progress_cases():
         "alone": [eight],                                                 # Kernel.alone
         "roots": _copies(eight, 9),                                       # Kernel.roots
         "roots-substeps": _copies(dataclasses.replace(eight, substeps=3), 9),
+        "alone-replanned": [_transient()],                                # run again with more sub-steps
+        "roots-replanned": _copies(_transient(), 9),
         "posture": _copies(Scenario(None, [Robot("p", controller("polar"), (-1.0, -1.0, 0.5), goal=(0.0, 0.0, 0.0))],
                                     duration=4.0, dt=0.02), 5),           # measured turn rates
         "sampled": _copies(dataclasses.replace(eight, control_period=0.05), 5),   # Kernel.integrate
@@ -204,7 +229,8 @@ def _progress_cases():
     }
 
 
-@pytest.mark.parametrize("case", ["alone", "roots", "roots-substeps", "posture", "sampled", "formation"])
+@pytest.mark.parametrize("case", ["alone", "roots", "roots-substeps", "alone-replanned", "roots-replanned", "posture",
+                                  "sampled", "formation"])
 def test_a_run_shown_with_progress_equals_one_run_without(case):
     # a progress bar runs the kernel in 50 resumed pieces (k_start, k_stop): every kernel
     # must give the same numbers as in one call

@@ -186,3 +186,39 @@ def test_score_alone_equals_the_batch_score(name):
     # and scoring the run's own trajectory reproduces the run's statistics
     assert np.allclose(alone_stats[rows, 0, 0], run.stats[rows, 0, 0], rtol=1e-12, atol=1e-12)
     assert alone_stats[kn.SAT_V, 0, 0] + alone_stats[kn.SAT_W, 0, 0] > 0
+
+
+@pytest.mark.parametrize("recorded", [False, True])
+def test_a_nan_copy_does_not_hide_the_rates_of_its_chunk(recorded):
+    """``Kernel.roots`` takes each step's largest rate over a chunk of copies (as integers):
+    a copy whose state is NaN adds nothing, as in ``Kernel.alone``, instead of making the
+    chunk's largest NaN and so dropping its other copies' rates (the sub-step plan would then
+    miss them)."""
+    from nonholo.sim.targets import TABLE_COLUMNS
+
+    config = controller("dynamic-feedback")
+    law, gains = config.law, config.gain_vector()
+    kernel = kernel_for(((law, config.controller.gain_tuple),), False)
+    n_steps, dt, copies = 3, 0.01, 9
+    rows = references.eight().table(np.arange(2 * n_steps + 3) * (dt / 2))
+
+    def step_rate(states):
+        n = states.shape[1]
+        fields = np.zeros((kn.MAX_FIELDS, 1, n))
+        fields[:len(gains)] = np.array(gains)[:, None, None]
+        stats, pair_stats = kn.new_stats(1, n)
+        rate = np.zeros(n_steps + 1)
+        kernel.roots(states[:, None, :].copy(), fields, np.full((2, 1, n), np.inf), rows, 2 * np.arange(n_steps + 1),
+                     np.ones(n_steps, np.int64), np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, n)),
+                     np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64), np.full((2, 1), -1, np.int64),
+                     np.zeros(1, np.int64), np.zeros((1, n)), 1e-3, np.zeros(n), 1.0, dt, 0, 0, n_steps, n_steps,
+                     stats, pair_stats, np.empty((kn.REC_ROBOT_COUNT, n_steps + 1 if recorded else 0, 1, n)),
+                     np.zeros((kn.HELD_COUNT, 1, n)), rate, False)
+        return rate
+
+    states = np.array([[0.3 * i, -0.2 * i, 0.4 * i, 0.5] for i in range(copies)]).T   # x, y, θ, ξ
+    finite = step_rate(states[:, 1:])
+    with_nan = states.copy()
+    with_nan[2, 0] = np.nan
+    assert finite[:n_steps].min() > 0
+    assert np.array_equal(step_rate(with_nan)[:n_steps], finite[:n_steps])

@@ -102,7 +102,7 @@ def polar_command(psi, gx, gy, gtheta, gains):
     """(v, ω, 0, 0) of the polar law at distance ψ from the goal and goal-frame pose
     (gx, gy, gθ): φ the direction to the goal, μ = φ − gθ."""
     k1, k2, k3, tolerance = gains.k1, gains.k2, gains.k3, gains.tolerance
-    phi = wrap_angle(math.atan2(-gy, -gx))   # in (−π, π]: atan2 gives −π for gy = +0.0 behind the goal
+    phi = wrap_angle(math.atan2(-gy, -gx))   # in (−π, π]: atan2 gives −π for gy = +0.0 ahead of the goal
     mu = wrap_angle(phi - gtheta)
     sin_mu, cos_mu = sincos(mu)
     v = k1 * psi * cos_mu

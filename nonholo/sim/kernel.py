@@ -25,8 +25,10 @@ R robots of one graph, listed so that ``order`` visits parents before children; 
   rows of every robot, then, in graphs with followers only, ``REC_LINK_COUNT`` rows of a
   follower's link (``record_rows``)
 * ``held``    (HELD_COUNT, R, B): commands held between control instants (sampled data)
-* ``step_rate`` (N + 1,): the fastest rate met during each output step (|ω| of every robot and
-  |ξ̇/ξ| of speed compensators), measured only for graphs with followers (sub-step planning)
+* ``step_rate`` (N + 1,): the fastest rate met during each output step, for sub-step planning:
+  in graphs with followers and of posture roots |ω| of every robot and |ξ̇/ξ| of speed
+  compensators at every stage (``stage_rate``), for tracking roots |ω| at each sub-step's
+  first stage (``tracking_rate``)
 
 Continuous-time control evaluates every law at every RK4 stage. Each robot keeps its four
 stages in registers; a robot with children writes its stage poses and commands to a small
@@ -328,11 +330,21 @@ def stage_rate(stage, xi_speed):
 
 
 @njit(inline="always", **_OPTIONS)
+def tracking_rate(omega):
+    """A tracking root's rate for its sub-step plan: |ω| (0 for NaN). Not |ξ̇/ξ|: ξ of
+    dynamic feedback starting at or crossing 0 grows as ξ̇·t, so |ξ̇/ξ| ≈ 1/t at a sub-step's
+    first stage, ≈ 1/h whatever h, and no plan would meet it; ω, guarded by ξ_min, carries
+    the 1/ξ growth that matters."""
+    return max(0.0, abs(omega))   # (numba's max(a, b) is b if b > a else a: NaN gives 0.0)
+
+
+@njit(inline="always", **_OPTIONS)
 def largest_rate(slope, n):
-    """The largest of the first n rates in row ``RATE_ROW`` of ``slope`` (``stage_rate``, not
-    negative): a maximum of their bit patterns as integers, which order non-negative floats
-    as their values do (NaN above inf) and which LLVM vectorizes; a float maximum carried
-    from copy to copy it may not reorder (NaN), and the loop holding it ran 2.5x slower."""
+    """The largest of the first n rates in row ``RATE_ROW`` of ``slope`` (not negative and not
+    NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a maximum of their bit
+    patterns as integers, which order non-negative floats as their values do and which LLVM
+    vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
+    loop holding it ran 2.5x slower."""
     bits = slope[RATE_ROW].view(np.int64)
     largest = bits[0]
     for i in range(1, n):
@@ -442,8 +454,8 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
     ``root`` is ``(address, posture, measuring)``: the law's entry
     (``nonholo.sim.lawcall.law_entry``), 1 for a posture law, and which rates go to
     ``step_rate``: ``MEASURE_STAGES`` every stage's (a posture law's start-up is not known in
-    advance), ``MEASURE_FIRST_STAGE`` each sub-step's first stage's (a tracking law's
-    transients: far starts, ξ near 0; as ``roots`` measures them). The law is called
+    advance), ``MEASURE_FIRST_STAGE`` each sub-step's first stage's ``tracking_rate`` (a
+    tracking law's transients: far starts, ξ near 0; as ``roots`` measures them). The law is called
     through its address, so this function is compiled once for every law (a single run pays
     a few nanoseconds per law evaluation for it: about 5 % of its time)."""
     address, posture, measuring = root
@@ -477,7 +489,7 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
                     step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
                                        stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
                 elif measuring == MEASURE_FIRST_STAGE:
-                    step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed))
+                    step_rate[k] = max(step_rate[k], tracking_rate(s1[6]))
         err1, err2 = root_errors(posture != 0, fields, r, b, x0, y0, theta0, ref)
         sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
         if recording:
@@ -514,7 +526,7 @@ def score_alone(root, states, fields, limits, rows, targets, offsets, kinds, ord
     state = states[0].copy()
     row_start, substeps, step_rate = np.arange(n_steps + 1), np.zeros(max(n_steps, 1), np.int64), np.zeros(n_steps + 1)
     k_start = np.int64(0)   # not a literal 0, which would compile ``run_alone`` a second time
-    law = (root[0], root[1], root[1])
+    law = (root[0], root[1], np.int64(MEASURE_NONE))   # (an int64 as in ``integrate_alone``: one compilation)
     for r in range(state.shape[1]):
         for b in range(state.shape[2]):
             run_alone(law, r, b, state, fields, limits, rows, row_start, substeps, 0.0, 0.0, k_start, n_steps,
@@ -988,7 +1000,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
-                        slope[RATE_ROW, i] = stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed)
+                        slope[RATE_ROW, i] = tracking_rate(omega)
                     peak = largest_rate(slope, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
                     for b in range(c0, c1):
@@ -998,8 +1010,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                                                                                             theta, xi, r0)
                         slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                        if measuring or first_stage_rates:
-                            slope[RATE_ROW, i] = stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed)
+                        if measuring:
+                            slope[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                        elif first_stage_rates:
+                            slope[RATE_ROW, i] = tracking_rate(omega)
                     if measuring or first_stage_rates:
                         peak = largest_rate(slope, np.int64(c1 - c0))
                 # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as

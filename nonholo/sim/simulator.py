@@ -590,8 +590,9 @@ def goal_origin(group: Group) -> tuple[list[int], np.ndarray] | None:
 
 
 def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
-    """Integrate a group; groups with followers or posture roots plan their sub-steps from the
-    rates they meet, window by window (``plan_windows``). Under continuous-time control a
+    """Integrate a group, planning its sub-steps from the rates it meets (see the module
+    docstring): groups with followers or posture roots window by window (``plan_windows``),
+    tracking roots over the whole horizon (under continuous-time control). Under continuous-time control a
     group of posture roots (and their followers) is integrated with its first goal as origin
     (``goal_origin``); its record is in world coordinates. (Sampled-data runs stay in world
     coordinates, as the robot programs of a fleet do.)"""
@@ -613,16 +614,20 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     work = float(plan.sum()) * n_robots * n_batch
     show = work > PROGRESS_WORK and sys.stderr.isatty() if progress is None else progress
     whole = linked(group)   # the link model runs the whole horizon at once (nonholo.sim.linkstep)
-    # Tracking roots run the horizon at once, again only in the rare run that a transient made
-    # under-resolved: windows cost a single run about 1 ms, and their rates are mostly met.
+    # Formations and posture roots are planned window by window (``spans``); tracking roots
+    # over the whole horizon, run again only in the rare run that a transient left
+    # under-resolved (windows would cost a single run about 1 ms, and their rates are mostly
+    # met). A progress bar moves piece by piece (``windows``) within a span: the numbers do
+    # not depend on whether it is shown.
     windowed = (group.measured and attempts > 1) or show
     windows = plan_windows(n_steps) if windowed and not whole else [(0, n_steps)]
+    spans = windows if group.measured or attempts == 1 else [(0, n_steps)]
 
     # The first tables before the outputs: in this order glibc's malloc keeps reusing the same
     # memory from one run to the next (the other way round, a Test 1 run faulted in 2 200
     # fresh pages, 9.8 instead of 5.4 ms, without nonholo.cli.tune_memory's settings).
     full = _plan_tables(scenario, dt, plan, cache_)   # the first plan's, until a window is planned again
-    rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, *windows[0])
+    rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, *spans[0])
     state, branch = start.copy(), group.initial_branches()
     stats, pair_stats = kn.new_stats(n_robots, n_batch)
     records = np.empty((kn.record_rows(group.followers), n_steps + 1 if record else 0, n_robots, n_batch))
@@ -632,9 +637,10 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     bar = _progress_bar(show and not whole, n_steps, scenario.name, n_robots * n_batch)
     kept = []   # each window's stage rows (reference, times), as integrated
     try:
-        for w, (k0, k1) in enumerate(windows):
+        for w, (k0, k1) in enumerate(spans):
             saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 else []
-            replanned = w > 0   # (the first window's tables are made above)
+            replanned = w > 0   # (the first span's tables are made above)
+            pieces = [(a, b) for a, b in windows if k0 <= a and b <= k1]
             for attempt in range(attempts):
                 if replanned:
                     rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, k0, k1)
@@ -645,7 +651,10 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 if whole:
                     integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
                 else:
-                    integrate(*args, k0, k1, n_steps, *outputs, False)
+                    for a, b in pieces:
+                        integrate(*args, a, b, n_steps, *outputs, False)
+                        if bar is not None and len(pieces) > 1:
+                            bar.update(b - a)
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
                 window = slice(k0, k1)
@@ -660,8 +669,11 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 step_rate[k0:k1 + 1] = 0.0
                 plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
                 replanned, full = True, None
+                if bar is not None and len(pieces) > 1:   # (the span is run again: its pieces too)
+                    bar.n -= k1 - k0
+                    bar.refresh()
             kept.append((rows, times))
-            if bar is not None:
+            if bar is not None and len(pieces) == 1:
                 bar.update(k1 - k0)
     finally:
         if bar is not None:
@@ -683,9 +695,11 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
 
 def plan_windows(n_steps: int) -> list[tuple[int, int]]:
     """The output steps [k0, k1) of the windows a run is integrated in: ``PLAN_WINDOWS`` of
-    them (fewer for short runs). A window whose own rates ask for more sub-steps than it ran
-    is run again from its start (see ``_run_rk4``); a progress bar moves window by window.
-    The windows depend only on ``n_steps``: a run gives the same numbers shown or not."""
+    them (fewer for short runs). A window of a formation or posture group whose own rates ask
+    for more sub-steps than it ran is run again from its start (see ``_run_rk4``; tracking
+    groups plan over the whole horizon, these windows only pieces for the progress bar); a
+    progress bar moves window by window. The windows depend only on ``n_steps``, and a
+    tracking group's plan not on them: a run gives the same numbers shown or not."""
     edges = np.unique(np.linspace(0, n_steps, min(PLAN_WINDOWS, n_steps) + 1).astype(np.int64))
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 

@@ -15,7 +15,8 @@ world start), ``gains.k1|k2``, ``d``, ``l``, ``phi`` (l–φ) or ``l1``, ``l2`` 
 ``omega_max``. Values are absolute: ``leader.start.x=normal(0, 0.5)`` draws x itself.
 
 **What is simulated.** Only the connected formations that a varied robot belongs to (a
-robot's result never depends on the formations it is simulated with), ``chunk_bounds``
+robot's result depends on the formations simulated with it only through the shared sub-step
+plan, to the last digits), ``chunk_bounds``
 samples per batch; chunk boundaries depend only on the study, so results are the same in
 this process and on a Dask cluster (``nonholo.studies.distributed``).
 
