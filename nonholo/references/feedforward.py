@@ -4,8 +4,11 @@ The flat output is the position p_d(t) = (x_d, y_d); heading and inputs follow
 algebraically from its first two derivatives, for a direction of motion s = ±1:
 
     v_d = s·sqrt(ẋ_d² + ẏ_d²)
-    θ_d = atan2(s·ẏ_d, s·ẋ_d)                      (four-quadrant, wrapped to (−π, π])
+    θ_d = atan2(s·ẏ_d, s·ẋ_d)                      (four-quadrant, in [−π, π]: −π for ẏ_d = −0.0)
     ω_d = (ẋ_d ÿ_d − ẏ_d ẍ_d) / (ẋ_d² + ẏ_d²)      (independent of s)
+
+θ_d enters the laws only through wrapped differences and its sine and cosine, so atan2's −π
+for a signed zero (the same heading as π) is kept as it comes.
 
 The simulator evaluates a reference into a *table*: one row per time at which the
 control law is evaluated, with the columns below. Compiled laws index rows by these
