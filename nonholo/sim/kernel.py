@@ -344,7 +344,8 @@ def largest_rate(slope, n):
     NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a maximum of their bit
     patterns as integers, which order non-negative floats as their values do and which LLVM
     vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
-    loop holding it ran 2.5x slower."""
+    loop holding it ran 2.5x slower. The largest is written back to the row's first slot and
+    read there as the float it is."""
     bits = slope[RATE_ROW].view(np.int64)
     largest = bits[0]
     for i in range(1, n):
@@ -626,7 +627,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # laws' start-up, at each sub-step's first stage for a tracking law's transients (far
     # starts, ξ near 0) in ``roots``, its statistics loop (see ``run_alone``).
     measuring = followers or posture_a or posture_b
-    first_stage_rates = not measuring
     two_laws = law_b is not idle_law  # one-law kernels compile no law dispatch in their loops
     root_rk4 = root_rk4_exact if followers else root_rk4_fused
     command = root_command_exact if followers else root_command
@@ -1012,10 +1012,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                         if measuring:
                             slope[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                        elif first_stage_rates:
+                        else:
                             slope[RATE_ROW, i] = tracking_rate(omega)
-                    if measuring or first_stage_rates:
-                        peak = largest_rate(slope, np.int64(c1 - c0))
+                    peak = largest_rate(slope, np.int64(c1 - c0))
                 # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
                 # variables (one loop over both stages, or a helper taking them) LLVM cannot tell
                 # the rows read from the rows written, and the loop ran 2.7x slower.
@@ -1047,8 +1046,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], slope[7, i], slope[11, i], dxi)
                     if measuring:
                         peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                if measuring or first_stage_rates:
-                    step_rate[k] = max(step_rate[k], peak)
+                step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
                 if j == 0 and not inline_sample:
                     add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, step_rate)
 

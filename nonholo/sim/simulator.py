@@ -607,8 +607,8 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
             fields[:2, j] -= origin
         start[:2] -= origin[:, None, :]
     # (tracking roots under sampled-data control hold their commands: no law's rate to meet)
-    measured = group.measured or scenario.hold_every == 0
-    attempts = PLAN_ATTEMPTS if measured and scenario.substeps is None else 1
+    planning = (group.measured or scenario.hold_every == 0) and scenario.substeps is None
+    attempts = PLAN_ATTEMPTS if planning else 1
     n_robots, n_batch = group.state.shape[1:]
     integrate = kernel.integrator(scenario.hold_every != 0, n_batch)
     work = float(plan.sum()) * n_robots * n_batch
@@ -619,9 +619,9 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     # under-resolved (windows would cost a single run about 1 ms, and their rates are mostly
     # met). A progress bar moves piece by piece (``windows``) within a span: the numbers do
     # not depend on whether it is shown.
-    windowed = (group.measured and attempts > 1) or show
-    windows = plan_windows(n_steps) if windowed and not whole else [(0, n_steps)]
-    spans = windows if group.measured or attempts == 1 else [(0, n_steps)]
+    per_window = group.measured and attempts > 1
+    windows = plan_windows(n_steps) if (per_window or show) and not whole else [(0, n_steps)]
+    spans = windows if per_window else [(0, n_steps)]
 
     # The first tables before the outputs: in this order glibc's malloc keeps reusing the same
     # memory from one run to the next (the other way round, a Test 1 run faulted in 2 200
@@ -653,7 +653,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 else:
                     for a, b in pieces:
                         integrate(*args, a, b, n_steps, *outputs, False)
-                        if bar is not None and len(pieces) > 1:
+                        if bar is not None:
                             bar.update(b - a)
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
@@ -669,12 +669,10 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 step_rate[k0:k1 + 1] = 0.0
                 plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
                 replanned, full = True, None
-                if bar is not None and len(pieces) > 1:   # (the span is run again: its pieces too)
+                if bar is not None:   # (the span is run again)
                     bar.n -= k1 - k0
                     bar.refresh()
             kept.append((rows, times))
-            if bar is not None and len(pieces) == 1:
-                bar.update(k1 - k0)
     finally:
         if bar is not None:
             bar.close()
