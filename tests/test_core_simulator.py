@@ -134,6 +134,41 @@ def test_a_tracking_transient_is_sub_stepped_from_the_rates_it_meets():
     assert not np.isfinite(runs[2][0].stats[kn.E_MEAN, 0, 0])
 
 
+def test_a_batch_runs_again_only_the_copies_that_need_more_sub_steps(monkeypatch):
+    """One fast copy (``_transient``) among starts that need no more sub-steps than planned in
+    advance: only it runs again, so the others keep the prior plan and equal their runs
+    alone bit for bit, and it gets at least the sub-steps it gets alone (its run again shares
+    a plan with the other copies run again). Every copy ends within its own plan's factor
+    (its ``STEP_RATE``)."""
+    from nonholo.sim import simulator as sm
+
+    transient = _transient()
+    fast = transient.robots[0]
+    calm = [dataclasses.replace(fast, name=f"c{i}", start=(0.05 * i, 0.1 * i - 0.3, 0.02 * i)) for i in range(9)]
+    robots = (*calm[:4], fast, *calm[4:])
+    batch = dataclasses.replace(transient, robots=robots)
+    copies_run = []
+    run_roots = sm.kn.Kernel.integrator
+
+    def counting(self, sampled_data, copies):
+        copies_run.append(copies)
+        return run_roots(self, sampled_data, copies)
+
+    monkeypatch.setattr(sm.kn.Kernel, "integrator", counting)
+    together = simulate(batch)
+    assert copies_run[0] == len(robots) and copies_run[1:] and set(copies_run[1:]) == {1}   # the fast one again
+    assert (together.stats[kn.STEP_RATE] <= sm.STABLE_STEP_FACTOR).all()
+    for i, robot in enumerate(robots):
+        alone = simulate(dataclasses.replace(transient, robots=(robot,)))
+        if robot is fast:
+            assert together.substeps[i] >= alone.substeps[0] > 1
+            assert np.abs(together.record[:2, :, i, 0] - alone.record[:2, :, 0, 0]).max() < 1e-6
+        else:
+            assert together.substeps[i] == alone.substeps[0] == 1
+            assert np.array_equal(together.stats[:, i, 0], alone.stats[:, 0, 0], equal_nan=True)
+            assert np.array_equal(together.record[:, :, i, 0], alone.record[:, :, 0, 0], equal_nan=True)
+
+
 def _transient() -> Scenario:
     """Dynamic feedback from a far start with a small ξ(0): ω reaches 38 rad/s (see below)."""
     robot = Robot("r", controller("dynamic-feedback", kp=1.0, kd=0.7, xi0=0.05), (18.0, -6.0, -0.8579290802496002))
@@ -267,7 +302,7 @@ def test_a_window_run_again_leaves_no_trace(monkeypatch, case):
 
     plans = []
     run_rk4 = sm._run_rk4
-    monkeypatch.setattr(sm, "_run_rk4", lambda *args: plans.append(run_rk4(*args)[-1]) or run_rk4(*args))
+    monkeypatch.setattr(sm, "_run_rk4", lambda *args: plans.append(run_rk4(*args)[3]) or run_rk4(*args))
     scenario = {"chain": lambda: _chain(3.0), "switch": lambda: _switch_at(10.0, dt=0.1),
                 "switch-sampled": lambda: _switch_at(10.0, dt=0.05, control_period=0.1)}[case]()
     planned = simulate(scenario)

@@ -222,3 +222,48 @@ def test_a_nan_copy_does_not_hide_the_rates_of_its_chunk(recorded):
     with_nan[2, 0] = np.nan
     assert finite[:n_steps].min() > 0
     assert np.array_equal(step_rate(with_nan)[:n_steps], finite[:n_steps])
+
+
+@pytest.mark.parametrize("plan", [(4, 1, 3, 2, 2, 1, 4, 1), (1, 4, 4, 2, 1, 3, 1, 4)])
+def test_each_copy_keeps_its_own_check_of_the_sub_step_plan(plan):
+    """A lone tracking root keeps, in its statistic ``STEP_RATE``, its largest rate met at a
+    sub-step's first stage times dt over the fewest sub-steps of that output step and its
+    neighbours: the largest over steps of its own ``step_rate`` times that, bit for bit, in
+    ``Kernel.alone`` and in ``Kernel.roots`` alike. It is within a factor f exactly when the
+    plan gives the copy every sub-step its own rates ask for (``measured_plan`` at f), which
+    is how the simulator picks the copies of a batch to run again."""
+    from nonholo.sim.simulator import measured_plan
+    from nonholo.sim.targets import TABLE_COLUMNS
+
+    config = controller("dynamic-feedback", xi0=0.3)
+    law, gains = config.law, config.gain_vector()
+    kernel = kernel_for(((law, config.controller.gain_tuple),), False)
+    dt, copies = 0.01, 9
+    plan = np.array(plan, dtype=np.int64)
+    n_steps = plan.size
+    row_start = np.zeros(n_steps + 1, dtype=np.int64)
+    np.cumsum(2 * plan, out=row_start[1:])
+    times = np.concatenate([k * dt + np.arange(2 * m) * dt / (2 * m) for k, m in enumerate(plan)] + [[n_steps * dt]])
+    rows = references.eight().table(times)
+
+    def run(states, integrate):
+        n = states.shape[1]
+        fields = np.zeros((kn.MAX_FIELDS, 1, n))
+        fields[:len(gains)] = np.array(gains)[:, None, None]
+        stats, pair_stats = kn.new_stats(1, n)
+        rate = np.zeros(n_steps + 1)
+        integrate(states[:, None, :].copy(), fields, np.full((2, 1, n), np.inf), rows, row_start, plan,
+                  np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, n)), np.full(1, kn.ROOT_A, np.int64),
+                  np.zeros(1, np.int64), np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, n)),
+                  1e-3, np.zeros(n), 1.0, dt, 0, 0, n_steps, n_steps, stats, pair_stats,
+                  np.empty((kn.REC_ROBOT_COUNT, 0, 1, n)), np.zeros((kn.HELD_COUNT, 1, n)), rate, False)
+        return stats[kn.STEP_RATE, 0], rate
+
+    states = np.array([[0.3 * i - 1.0, -0.2 * i, 0.7 * i, 0.3] for i in range(copies)]).T   # x, y, θ, ξ
+    batch, _ = run(states, kernel.integrator(False, copies))
+    fewest = np.minimum.reduce([plan, np.r_[plan[:1], plan[:-1]], np.r_[plan[1:], plan[-1:]]])
+    for c in range(copies):
+        own, step_rate = run(states[:, c:c + 1], kernel.integrator(False, 1))
+        assert own[0] == batch[c] == (step_rate[:n_steps] * (dt / fewest)).max() > 0
+        for factor, fits in ((own[0] * (1 + 1e-9), True), (own[0] * (1 - 1e-9), False)):
+            assert (measured_plan(step_rate, np.ones(n_steps, np.int64), dt, factor=factor) <= plan).all() == fits

@@ -28,7 +28,8 @@ R robots of one graph, listed so that ``order`` visits parents before children; 
 * ``step_rate`` (N + 1,): the fastest rate met during each output step, for sub-step planning:
   in graphs with followers and of posture roots |ω| of every robot and |ξ̇/ξ| of speed
   compensators at every stage (``stage_rate``), for tracking roots |ω| at each sub-step's
-  first stage (``tracking_rate``)
+  first stage (``tracking_rate``); lone tracking roots under continuous-time control also
+  keep their own largest rate × step in their statistics (``STEP_RATE``, ``wide_substep``)
 
 Continuous-time control evaluates every law at every RK4 stage. Each robot keeps its four
 stages in registers; a robot with children writes its stage poses and commands to a small
@@ -111,8 +112,9 @@ K1, K2, OFFSET_D = 0, 1, 2  # a follower's fields
 
 (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK, V_PEAK_T, W_PEAK, W_PEAK_T, V_SQ, W_SQ,
  SAT_V, SAT_W, SINGULAR, FIRST_SINGULAR, SAT_ANY, MIN_SIN, MIN_SIN_T, NEAR, NEAR_T, NEAR_WHO, BELOW_2D, SIN_LAST,
- SIN_CROSSINGS, WATCHDOG_STOPS, WATCHDOG_STOPPED) = range(30)
-STAT_COUNT = 30   # (the last two: a follower's watchdog under a link model, counted by nonholo.sim.linkstep)
+ SIN_CROSSINGS, WATCHDOG_STOPS, WATCHDOG_STOPPED, STEP_RATE) = range(31)
+STAT_COUNT = 31   # (WATCHDOG_*: a follower's watchdog under a link model, counted by nonholo.sim.linkstep;
+# STEP_RATE: a tracking root's own check of its sub-step plan, ``wide_substep``)
 ROBOT_STATS = SAT_ANY + 1   # the statistics of every robot (``add_sample``); the rest: formations
 # ``robot_stats``, ``add_sample`` and ``store_stats`` hold them as a tuple in this order (SAT_ANY:
 # samples where v or ω or both were clipped).
@@ -339,6 +341,22 @@ def tracking_rate(omega):
 
 
 @njit(inline="always", **_OPTIONS)
+def wide_substep(substeps, k, n_steps, dt):
+    """dt over the fewest sub-steps of output step k and of its neighbours. A tracking root's
+    rate met in step k asks for sub-steps in steps k − 1, k and k + 1 (the simulator's
+    ``measured_plan``), so the largest ``tracking_rate`` × this over a copy's run (its
+    statistic ``STEP_RATE``) is within the plan's factor exactly when the plan gives the copy
+    every sub-step its own rates ask for: the simulator runs again only the copies of a batch
+    that are short."""
+    m = substeps[k]
+    if k > 0:
+        m = min(m, substeps[k - 1])
+    if k + 1 < n_steps:
+        m = min(m, substeps[k + 1])
+    return dt / m
+
+
+@njit(inline="always", **_OPTIONS)
 def largest_rate(slope, n):
     """The largest of the first n rates in row ``RATE_ROW`` of ``slope`` (not negative and not
     NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a maximum of their bit
@@ -466,6 +484,7 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
     x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
     v_max, omega_max = limits[0, r, b], limits[1, r, b]
     sample = robot_stats(stats, r, b)
+    own = stats[STEP_RATE, r, b]
     for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
         if scoring:
             x, y, theta, xi = given[k, 0, r, b], given[k, 1, r, b], given[k, 2, r, b], given[k, 3, r, b]
@@ -478,6 +497,7 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
         else:   # the first RK4 stage's command is the one in force at t_k (as in ``roots``)
             v = omega = singular = sat_v = sat_w = 0.0
             m = substeps[k]
+            wide = wide_substep(substeps, k, n_steps, dt)
             for j in range(m):
                 new, s1, s2, s3, s4 = root_rk4_fused(law_at_address, gains_i, x, y, theta, xi,
                                                      row_address(rows, row + 2 * j),
@@ -490,7 +510,9 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
                     step_rate[k] = max(step_rate[k], stage_rate(s1, xi_speed), stage_rate(s2, xi_speed),
                                        stage_rate(s3, xi_speed), stage_rate(s4, xi_speed))
                 elif measuring == MEASURE_FIRST_STAGE:
-                    step_rate[k] = max(step_rate[k], tracking_rate(s1[6]))
+                    rate = tracking_rate(s1[6])
+                    step_rate[k] = max(step_rate[k], rate)
+                    own = max(own, rate * wide)
         err1, err2 = root_errors(posture != 0, fields, r, b, x0, y0, theta0, ref)
         sample = add_sample(sample, ref[0], k, v, omega, singular, sat_v, sat_w, err1, err2)
         if recording:
@@ -499,6 +521,7 @@ def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, 
             step_rate[k] = max(step_rate[k], abs(omega))
     state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b] = x, y, theta, xi
     store_stats(stats, r, b, sample)
+    stats[STEP_RATE, r, b] = own
 
 
 @njit(**_OPTIONS)
@@ -983,6 +1006,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             m = substeps[k]
             h = dt / m
             half, sixth = 0.5 * h, h / 6.0
+            wide = wide_substep(substeps, k, n_steps, dt)
             # Unrecorded, the sample at t_k goes to the statistics in the first stage's own loop:
             # their stores then overlap the stage's arithmetic.
             inline_sample = record.shape[1] == 0 and not measuring
@@ -1000,7 +1024,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
-                        slope[RATE_ROW, i] = tracking_rate(omega)
+                        rate = tracking_rate(omega)
+                        slope[RATE_ROW, i] = rate
+                        stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], rate * wide)
                     peak = largest_rate(slope, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
                     for b in range(c0, c1):
@@ -1013,7 +1039,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         if measuring:
                             slope[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                         else:
-                            slope[RATE_ROW, i] = tracking_rate(omega)
+                            rate = tracking_rate(omega)
+                            slope[RATE_ROW, i] = rate
+                            stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], rate * wide)
                     peak = largest_rate(slope, np.int64(c1 - c0))
                 # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
                 # variables (one loop over both stages, or a helper taking them) LLVM cannot tell

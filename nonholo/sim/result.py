@@ -122,7 +122,7 @@ class SimulationResult:
     closest pair of each connected formation; ``record`` (rows, N+1, robots, members) when
     recorded (``nonholo.sim.kernel.REC_*``: the robot rows, then the link rows of a follower
     only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per
-    output step used.
+    output step used (over the members of a batch).
     ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 

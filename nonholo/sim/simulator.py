@@ -7,7 +7,9 @@ formations that share a structure (graph, laws, targets) and a sub-step plan are
 together as one batch, copies along the kernel's batch axis: 10 000 lone robots under one
 law are one group of 10 000 copies of a one-robot graph. So a robot's result depends on the
 other formations it is simulated with only through the sub-steps planned from the rates the
-group meets (below): where one copy needs more, all get them, never fewer than their own.
+group meets (below): where one copy needs more, all get them, never fewer than their own —
+except in groups of lone tracking roots, where only the copies whose own rates asked for more
+run again (their statistic ``STEP_RATE``): the others equal their runs alone bit for bit.
 
 **The sub-step rule.** RK4 sub-steps per output step are given (``substeps``) or planned so
 that h·λ ≤ ``STABLE_STEP_FACTOR`` for every rate λ known in advance — each root law's
@@ -20,8 +22,8 @@ compensators) — and h·ω ≤ ``STABLE_STEP_FACTOR`` for a tracking law's (at 
 each sub-step: a far start, or ξ of dynamic feedback near 0, turns far faster than the
 reference; one RK4 step per dt at h·ω = 2.5 drove ξ through 0 and the robot on backward).
 A tracking group runs its horizon at once and again, with more sub-steps where its rates
-asked for them, only if they did. Formations' and posture laws' rates are met while
-running: the horizon is integrated in ``PLAN_WINDOWS``
+asked for them, only if they did, and only the copies whose own rates did. Formations' and
+posture laws' rates are met while running: the horizon is integrated in ``PLAN_WINDOWS``
 windows of output steps (``plan_windows``), and a window whose own rates ask for more
 sub-steps than it ran is run again from its start (state, bearings, statistics and held
 commands put back) with more — at most ``PLAN_GROWTH`` times as many per step at each attempt,
@@ -407,16 +409,17 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     pair_stats = np.full((kn.PAIR_COUNT, len(first.components()), n_members), np.nan)
     rec_rows = kn.record_rows(bool(first.followers))   # no link rows without followers
     records = None if record else np.empty((rec_rows, 0, n_robots, n_members))
-    substeps = np.empty(n_robots, dtype=np.int64)
+    substeps = np.zeros(n_robots, dtype=np.int64)
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
     for group in _groups(scenarios, v_peak, omega_peak, v_d0):
         kernel = kernel_for(group.laws, group.followers)
         if first.method == "rk4":
-            g_stats, g_pairs, g_record, plan = _run_rk4(kernel, first, group, record, progress, reference_cache)
+            g_stats, g_pairs, g_record, _, most = _run_rk4(kernel, first, group, record, progress, reference_cache)
         else:
-            g_stats, g_pairs, g_record, plan = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
-                                                              grid)
+            g_stats, g_pairs, g_record = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
+                                                        grid)
+            most = np.ones(len(group.copies), dtype=np.int64)
         if record and records is None:   # one group of every robot of every member: its record is the record
             records = g_record if _whole(group, n_robots, n_members) else \
                 np.empty((rec_rows, n_steps + 1, n_robots, n_members))
@@ -426,7 +429,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         pair_stats[:, [component_of[indices[0]] for _, indices in group.copies], members] = g_pairs
         if record and records is not g_record:
             _merge_record(records, g_record, index, members)
-        substeps[index.ravel()] = plan.max()
+        np.maximum.at(substeps, index.ravel(), np.repeat(most, index.shape[1]))   # (copies index-major)
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
     rows = None
@@ -489,7 +492,7 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
     cache_: dict[bytes, tuple] = {}
     planned = []
     for group in _groups([scenario], v_peak, omega_peak, v_d0):
-        *_, plan = _run_rk4(kernel_for(group.laws, group.followers), scenario, group, False, False, cache_)
+        _, _, _, plan, _ = _run_rk4(kernel_for(group.laws, group.followers), scenario, group, False, False, cache_)
         stage_rows, row_start, times = cache_[plan.tobytes()]
         table = group.targets(times)   # one row when no target changes
         targets = table[row_start] if table.shape[0] > 1 else np.repeat(table, row_start.size, axis=0)
@@ -592,7 +595,11 @@ def goal_origin(group: Group) -> tuple[list[int], np.ndarray] | None:
 def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, progress, cache_: dict):
     """Integrate a group, planning its sub-steps from the rates it meets (see the module
     docstring): groups with followers or posture roots window by window (``plan_windows``),
-    tracking roots over the whole horizon (under continuous-time control). Under continuous-time control a
+    tracking roots over the whole horizon (under continuous-time control), and only the copies
+    whose own rates asked for more sub-steps (their statistic ``STEP_RATE``) run again: a
+    batch's copies get the sub-steps they need, and those that need no more are not run again.
+    Returns the statistics, pair statistics, record, the plan of the last run and each copy's
+    most sub-steps per output step. Under continuous-time control a
     group of posture roots (and their followers) is integrated with its first goal as origin
     (``goal_origin``); its record is in world coordinates. (Sampled-data runs stay in world
     coordinates, as the robot programs of a fleet do.)"""
@@ -633,9 +640,10 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     records = np.empty((kn.record_rows(group.followers), n_steps + 1 if record else 0, n_robots, n_batch))
     held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
     step_rate = np.zeros(n_steps + 1)
-    outputs = (stats, pair_stats, records, held, step_rate)
     bar = _progress_bar(show and not whole, n_steps, scenario.name, n_robots * n_batch)
     kept = []   # each window's stage rows (reference, times), as integrated
+    most = np.zeros(n_batch, dtype=np.int64)   # each copy's most sub-steps per output step
+    live = None   # the copies integrated: all, or (a tracking group's) those run again
     try:
         for w, (k0, k1) in enumerate(spans):
             saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 else []
@@ -644,17 +652,29 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
             for attempt in range(attempts):
                 if replanned:
                     rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, k0, k1)
-                args = (state, fields, group.limits, rows, row_start, plan, targets, group.offsets, group.kinds,
-                        group.order, group.parents, group.feeds, branch, scenario.sin_floor, group.d_max,
+                copies = (state, fields, group.limits, group.offsets, branch, group.d_max, stats, pair_stats, records,
+                          held)
+                if live is not None:   # (contiguous copies of the copies run again)
+                    copies = [np.ascontiguousarray(array[..., live]) for array in copies]
+                run_state, run_fields, run_limits, run_offsets, run_branch, run_d_max, *run_outputs = copies
+                args = (run_state, run_fields, run_limits, rows, row_start, plan, targets, run_offsets, group.kinds,
+                        group.order, group.parents, group.feeds, run_branch, scenario.sin_floor, run_d_max,
                         group.xi_speed, dt, scenario.hold_every)
+                outputs = (*run_outputs, step_rate)
                 replanned = False
                 if whole:
                     integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
                 else:
+                    run = integrate if live is None else kernel.integrator(scenario.hold_every != 0, live.size)
                     for a, b in pieces:
-                        integrate(*args, a, b, n_steps, *outputs, False)
+                        run(*args, a, b, n_steps, *outputs, False)
                         if bar is not None:
                             bar.update(b - a)
+                if live is not None:
+                    for array, part in zip((state, branch, stats, pair_stats, records, held),
+                                           (run_state, run_branch, *run_outputs)):
+                        array[..., live] = part
+                most[slice(None) if live is None else live] = plan.max()
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
                 window = slice(k0, k1)
@@ -664,9 +684,20 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 short = needed > plan[window]
                 if not short.any():
                     break
+                if not per_window:   # only the copies whose own rates asked for more run again
+                    own = stats[kn.STEP_RATE].max(axis=0) > group.rate_factor
+                    if live is not None:
+                        own[np.setdiff1d(np.arange(n_batch), live)] = False
+                    if not own.any():
+                        break
+                    live = np.flatnonzero(own)
                 for array, copy in zip((state, branch, stats, pair_stats, held), saved):
-                    array[...] = copy
+                    if live is None:
+                        array[...] = copy
+                    else:
+                        array[..., live] = copy[..., live]
                 step_rate[k0:k1 + 1] = 0.0
+                plan = plan.copy()   # (the plan of the copies that stand is kept)
                 plan[window] = np.where(short, np.minimum(needed, PLAN_GROWTH * plan[window]), plan[window])
                 replanned, full = True, None
                 if bar is not None:   # (the span is run again)
@@ -688,7 +719,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     if shift is not None and record:   # back to world coordinates (rounded there), the starts as given
         records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
         records[[kn.REC_X, kn.REC_Y], 0] = group.state[:2]
-    return stats, pair_stats, records, plan
+    return stats, pair_stats, records, plan, most
 
 
 def plan_windows(n_steps: int) -> list[tuple[int, int]]:
@@ -811,4 +842,4 @@ def _run_solve_ivp(evaluate, score, scenario: Scenario, group: Group, record: bo
     score(states, group.fields, group.limits, _reference_rows(scenario, grid), group.targets(grid), group.offsets,
           group.kinds, group.order, group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, stats,
           pair_stats, records, 0, np.zeros((0, kn.HELD_COUNT, n_robots, n_batch)))
-    return stats, pair_stats, records, np.ones(scenario.n_steps, dtype=np.int64)
+    return stats, pair_stats, records

@@ -9,7 +9,7 @@ study alone, never of the machine or the cluster — and ``run_chunks`` calls a 
 function on every chunk, in this process (the default: one process, one chunk after the
 other) or on a Dask cluster (``dask="local"`` for a local cluster of worker processes, or a
 scheduler address such as ``tcp://10.0.0.5:8786``). Because the chunks are the same either
-way, so are the results, bit for bit: members simulated together share a sub-step plan, and
+way, so are the results, bit for bit: members simulated together are planned together, and
 each chunk is one batch on both paths.
 
 Chunk functions receive picklable payloads: scenarios travel as their TOML text and are
