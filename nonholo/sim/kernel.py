@@ -974,6 +974,14 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))
 
     @njit(inline="always", **_OPTIONS)
+    def keep_step_rate(stats, r, c0, c1, slope, wide):
+        """Each copy's ``STEP_RATE``: the largest of its rates (``slope``'s row ``RATE_ROW``,
+        before ``largest_rate`` overwrites its first slot) times ``wide_substep``. A loop of
+        its own: in the stage's loop the load and store cost the kernel ~5 %."""
+        for b in range(c0, c1):
+            stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], slope[RATE_ROW, b - c0] * wide)
+
+    @njit(inline="always", **_OPTIONS)
     def root_stage(r, b, fields, limits, x, y, theta, xi, ref):
         """Copy b of root r at one RK4 stage: its rates (ẋ, ẏ, θ̇, ξ̇) and command (v, ω,
         singular, sat v, sat ω)."""
@@ -1024,9 +1032,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
-                        rate = tracking_rate(omega)
-                        slope[RATE_ROW, i] = rate
-                        stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], rate * wide)
+                        slope[RATE_ROW, i] = tracking_rate(omega)
+                    keep_step_rate(stats, r, c0, c1, slope, wide)
                     peak = largest_rate(slope, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
                     for b in range(c0, c1):
@@ -1039,9 +1046,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         if measuring:
                             slope[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                         else:
-                            rate = tracking_rate(omega)
-                            slope[RATE_ROW, i] = rate
-                            stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], rate * wide)
+                            slope[RATE_ROW, i] = tracking_rate(omega)
+                    if not measuring:
+                        keep_step_rate(stats, r, c0, c1, slope, wide)
                     peak = largest_rate(slope, np.int64(c1 - c0))
                 # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
                 # variables (one loop over both stages, or a helper taking them) LLVM cannot tell
