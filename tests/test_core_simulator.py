@@ -302,7 +302,7 @@ def test_a_window_run_again_leaves_no_trace(monkeypatch, case):
 
     plans = []
     run_rk4 = sm._run_rk4
-    monkeypatch.setattr(sm, "_run_rk4", lambda *args: plans.append(run_rk4(*args)[3]) or run_rk4(*args))
+    monkeypatch.setattr(sm, "_run_rk4", lambda *args: plans.append(run_rk4(*args).plan) or run_rk4(*args))
     scenario = {"chain": lambda: _chain(3.0), "switch": lambda: _switch_at(10.0, dt=0.1),
                 "switch-sampled": lambda: _switch_at(10.0, dt=0.05, control_period=0.1)}[case]()
     planned = simulate(scenario)
@@ -386,3 +386,27 @@ def test_a_record_has_link_rows_only_where_the_scenario_has_followers():
     assert not both.record[kn.REC_ROBOT_COUNT:, :, 2].any()
     l, phi = both.outputs(chain.robots[1].name)
     assert l[0] > 0 and np.isfinite(phi).all()   # the follower's link rows are recorded
+
+
+def test_the_result_counts_the_rk4_steps_its_plan_cost():
+    # given sub-steps: exactly robots x steps x sub-steps; a planned run counts its runs again
+    eight = Scenario(references.eight(), [Robot("a", controller("kanayama")), Robot("b", controller("kanayama"))],
+                     duration=1.0, dt=0.01)
+    assert simulate(dataclasses.replace(eight, substeps=3)).rk4_steps == 2 * 100 * 3
+    assert simulate(eight).to_dict()["simulation"]["rk4_steps"] == 2 * 100
+    transient = simulate(_transient())
+    n = _transient().n_steps
+    assert transient.rk4_steps > 2 * n   # its first run (n) and at least one more, with more sub-steps
+    assert simulate(dataclasses.replace(_transient(), method="solve_ivp")).rk4_steps == 0
+
+
+def test_the_bench_batch_runs_again_only_its_few_fast_starts():
+    """``nonholo bench``'s batch of 10^4 random starts: 25 turn fast at their start and need
+    more sub-steps there. Only they run again: about one RK4 step per robot-step (when the
+    whole batch ran again, up to four times, its figure fell fivefold)."""
+    from nonholo.sim import benchmark
+
+    batch = benchmark.batch_scenario(duration=2.0)
+    result = simulate(batch, record=False)
+    assert result.substeps.max() > 1 and (result.substeps > 1).sum() < 100
+    assert result.rk4_steps < 1.1 * len(batch.robots) * batch.n_steps

@@ -10,6 +10,8 @@ TARGETS = (
     ("single_cold_s", "first call, fresh process (JIT cache on disk)", "s", ""),
     ("batch_robot_steps_per_s", "batch of 10^4 robots", "robot-steps/s", ">= 1.1e8"),
     ("formation_robot_steps_per_s", "batch of 10^3 chains (leader + 7 followers)", "robot-steps/s", ""),
+    ("batch_rk4_steps_per_robot_step", "RK4 steps per robot-step, batch of 10^4", "x", ""),
+    ("formation_rk4_steps_per_robot_step", "RK4 steps per robot-step, chains", "x", ""),
     ("baseline_python_ms", "baseline: plain-Python RK4 loop", "ms", ""),
     ("baseline_solve_ivp_ms", "baseline: solve_ivp (RK45, default tolerances)", "ms", ""),
     ("baseline_numpy_batch_robot_steps_per_s", "baseline: numpy-vectorized batch", "robot-steps/s", ""),
@@ -59,7 +61,8 @@ def handle(args) -> int:
     for key, label, unit, target in TARGETS:
         spread = figures["spread"].get(key)
         low_high = f"{shown(spread[0])}–{shown(spread[1])}" if spread else ""
-        print(f"{label[:46]:<46} {shown(figures[key]):>9} {unit:<13} {low_high:<17} {target}".rstrip())
+        value = f"{figures[key]:.3f}" if key.endswith("rk4_steps_per_robot_step") else shown(figures[key])
+        print(f"{label[:46]:<46} {value:>9} {unit:<13} {low_high:<17} {target}".rstrip())
     if args.profile:
         profile = figures["profile"]
         print(f"\nwhere a batch step goes (dynamic feedback, {profile['robots']} robots x {profile['steps']} steps)")

@@ -122,7 +122,10 @@ class SimulationResult:
     closest pair of each connected formation; ``record`` (rows, N+1, robots, members) when
     recorded (``nonholo.sim.kernel.REC_*``: the robot rows, then the link rows of a follower
     only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per
-    output step used (over the members of a batch).
+    output step used (over the members of a batch); ``rk4_steps`` the RK4 steps integrated
+    over every robot of every member, runs again with more sub-steps included (what the
+    sub-step plan cost: robots × output steps for one step each; 0 for ``solve_ivp`` and for
+    trajectories computed elsewhere).
     ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 
@@ -134,6 +137,7 @@ class SimulationResult:
     record: np.ndarray | None
     substeps: np.ndarray
     elapsed_s: float
+    rk4_steps: int = 0
     metrics: Metrics = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -345,7 +349,8 @@ class SimulationResult:
         scenario = self.scenarios[member]
         simulation = {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
                       "method": scenario.method, "control_period": scenario.held_period,
-                      "max_substeps": int(self.substeps.max()), "elapsed_s": self.elapsed_s,
+                      "max_substeps": int(self.substeps.max()), "rk4_steps": self.rk4_steps,
+                      "elapsed_s": self.elapsed_s,
                       "batch": len(self.scenarios)}
         if scenario.network is not None and not scenario.network.ideal:
             simulation["link_model"] = scenario.network.describe()   # spec fleet.md §3–5

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections import defaultdict
+from collections import defaultdict, namedtuple
 from collections.abc import Sequence
 from functools import cache
 
@@ -381,6 +381,11 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
 
 ON_DIVERGENCE = ("raise", "report")
 
+GroupRun = namedtuple("GroupRun", ("stats", "pair_stats", "records", "plan", "most", "rk4_steps"))
+GroupRun.__doc__ = """What ``_run_rk4`` returns for a group: its statistics, pair statistics and record, the
+plan of its last run, each copy's most sub-steps per output step, and the RK4 steps it
+integrated over every robot and copy, runs again included."""
+
 
 def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
              progress: bool | None = None, on_divergence: str = "raise") -> SimulationResult:
@@ -412,10 +417,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     substeps = np.zeros(n_robots, dtype=np.int64)
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
+    rk4_steps = 0
     for group in _groups(scenarios, v_peak, omega_peak, v_d0):
         kernel = kernel_for(group.laws, group.followers)
         if first.method == "rk4":
-            g_stats, g_pairs, g_record, _, most = _run_rk4(kernel, first, group, record, progress, reference_cache)
+            run = _run_rk4(kernel, first, group, record, progress, reference_cache)
+            g_stats, g_pairs, g_record, most = run.stats, run.pair_stats, run.records, run.most
+            rk4_steps += run.rk4_steps
         else:
             g_stats, g_pairs, g_record = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
                                                         grid)
@@ -438,7 +446,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         rows = _output_rows(stage_rows, row_start) if stage_rows is not None else first.reference.table(grid)
     return SimulationResult(scenarios=tuple(scenarios), t=grid, reference_rows=rows, stats=stats,
                             pair_stats=pair_stats, record=records if record else None, substeps=substeps,
-                            elapsed_s=time.perf_counter() - started)
+                            elapsed_s=time.perf_counter() - started, rk4_steps=rk4_steps)
 
 
 def _output_rows(stage_rows: np.ndarray, row_start: np.ndarray) -> np.ndarray:
@@ -492,7 +500,7 @@ def planned_groups(scenario: Scenario) -> list[PlannedGroup]:
     cache_: dict[bytes, tuple] = {}
     planned = []
     for group in _groups([scenario], v_peak, omega_peak, v_d0):
-        _, _, _, plan, _ = _run_rk4(kernel_for(group.laws, group.followers), scenario, group, False, False, cache_)
+        plan = _run_rk4(kernel_for(group.laws, group.followers), scenario, group, False, False, cache_).plan
         stage_rows, row_start, times = cache_[plan.tobytes()]
         table = group.targets(times)   # one row when no target changes
         targets = table[row_start] if table.shape[0] > 1 else np.repeat(table, row_start.size, axis=0)
@@ -598,8 +606,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     tracking roots over the whole horizon (under continuous-time control), and only the copies
     whose own rates asked for more sub-steps (their statistic ``STEP_RATE``) run again: a
     batch's copies get the sub-steps they need, and those that need no more are not run again.
-    Returns the statistics, pair statistics, record, the plan of the last run and each copy's
-    most sub-steps per output step. Under continuous-time control a
+    Returns a ``GroupRun``. Under continuous-time control a
     group of posture roots (and their followers) is integrated with its first goal as origin
     (``goal_origin``); its record is in world coordinates. (Sampled-data runs stay in world
     coordinates, as the robot programs of a fleet do.)"""
@@ -643,6 +650,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     bar = _progress_bar(show and not whole, n_steps, scenario.name, n_robots * n_batch)
     kept = []   # each window's stage rows (reference, times), as integrated
     most = np.zeros(n_batch, dtype=np.int64)   # each copy's most sub-steps per output step
+    rk4_steps = 0
     live = None   # the copies integrated: all, or (a tracking group's) those run again
     try:
         for w, (k0, k1) in enumerate(spans):
@@ -675,6 +683,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                                            (run_state, run_branch, *run_outputs)):
                         array[..., live] = part
                 most[slice(None) if live is None else live] = plan.max()
+                rk4_steps += int(plan[k0:k1].sum()) * n_robots * (n_batch if live is None else live.size)
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
                 window = slice(k0, k1)
@@ -719,7 +728,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     if shift is not None and record:   # back to world coordinates (rounded there), the starts as given
         records[[kn.REC_X, kn.REC_Y]] += shift[1][:, None, None, :]
         records[[kn.REC_X, kn.REC_Y], 0] = group.state[:2]
-    return stats, pair_stats, records, plan, most
+    return GroupRun(stats, pair_stats, records, plan, most, rk4_steps)
 
 
 def plan_windows(n_steps: int) -> list[tuple[int, int]]:
