@@ -124,8 +124,8 @@ class SimulationResult:
     only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per
     output step used (over the members of a batch); ``rk4_steps`` the RK4 steps integrated
     over every robot of every member, runs again with more sub-steps included (what the
-    sub-step plan cost: robots × output steps for one step each; 0 for ``solve_ivp`` and for
-    trajectories computed elsewhere).
+    sub-step plan cost: robots × output steps for one step each; 0 for ``solve_ivp``; for a
+    fleet's trajectories, the steps its robots integrated on the plan they were given).
     ``metrics`` per robot. Accessors take ``member`` (the scenario of a batch, default 0).
     """
 

@@ -542,8 +542,9 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
         stats[[kn.WATCHDOG_STOPS, kn.WATCHDOG_STOPPED], :, 0] = watchdog
     grid = np.arange(n_steps + 1) * scenario.dt
     rows = planned[0].rows if scenario.reference is not None else None
+    rk4_steps = sum(int(item.plan.sum()) * item.group.state.shape[1] * item.group.state.shape[2] for item in planned)
     return SimulationResult(scenarios=(scenario,), t=grid, reference_rows=rows, stats=stats, pair_stats=pair_stats,
-                            record=records, substeps=substeps, elapsed_s=elapsed_s)
+                            record=records, substeps=substeps, elapsed_s=elapsed_s, rk4_steps=rk4_steps)
 
 
 def _check_size(scenario: Scenario, robots: int, record: bool) -> None:
