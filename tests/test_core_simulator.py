@@ -138,8 +138,8 @@ def test_a_batch_runs_again_only_the_copies_that_need_more_sub_steps(monkeypatch
     """One fast copy (``_transient``) among starts that need no more sub-steps than planned in
     advance: only it runs again, so the others keep the prior plan and equal their runs
     alone bit for bit, and it gets at least the sub-steps it gets alone (its run again shares
-    a plan with the other copies run again). Every copy ends within its own plan's factor
-    (its ``STEP_RATE``)."""
+    a plan with the other copies run again). Here every copy ends within its own plan's
+    factor (its ``STEP_RATE``; a copy still short after ``PLAN_ATTEMPTS`` runs would not)."""
     from nonholo.sim import simulator as sm
 
     transient = _transient()
@@ -167,6 +167,26 @@ def test_a_batch_runs_again_only_the_copies_that_need_more_sub_steps(monkeypatch
             assert together.substeps[i] == alone.substeps[0] == 1
             assert np.array_equal(together.stats[:, i, 0], alone.stats[:, 0, 0], equal_nan=True)
             assert np.array_equal(together.record[:, :, i, 0], alone.record[:, :, 0, 0], equal_nan=True)
+
+
+def test_members_that_differ_in_gains_get_their_own_prior_plans():
+    # a stiff member (kp = 2500: its law's rate 50/s asks for 20 sub-steps at start-up, then 2)
+    # in a batch with a member of the default gains: each integrates on the plan it gets
+    # alone, bit for bit (a batch took the first member's prior plan for all: 1.1e-5 m off)
+    eight = references.eight()
+
+    def member(**gains):
+        return Scenario(eight, [Robot("r", controller("dynamic-feedback", **gains), (0.01, 0.01, 0.0))], duration=4.0,
+                        dt=0.01)
+
+    members = [member(), member(kp=2500.0, kd=100.0), member()]
+    together = simulate(members)
+    assert together.member_substeps.tolist() == [[1, 20, 1]] and together.substeps.tolist() == [20]
+    assert [together.to_dict(m)["robots"]["r"]["substeps"] for m in range(3)] == [1, 20, 1]
+    for m, scenario in enumerate(members):
+        alone = simulate(scenario)
+        assert np.array_equal(together.record[..., m], alone.record[..., 0], equal_nan=True)
+        assert np.array_equal(together.stats[..., m], alone.stats[..., 0], equal_nan=True)
 
 
 def _transient() -> Scenario:

@@ -267,3 +267,12 @@ def test_each_copy_keeps_its_own_check_of_the_sub_step_plan(plan):
         assert own[0] == batch[c] == (step_rate[:n_steps] * (dt / fewest)).max() > 0
         for factor, fits in ((own[0] * (1 + 1e-9), True), (own[0] * (1 - 1e-9), False)):
             assert (measured_plan(step_rate, np.ones(n_steps, np.int64), dt, factor=factor) <= plan).all() == fits
+
+
+def test_steps_at_the_most_sub_steps_ask_for_no_more():
+    # measured_plan never asks for more than MAX_SUBSTEPS: a step already there is never
+    # short, so it leaves the copy's own check (a copy whose rates ask for more than the
+    # most would otherwise be run again at every attempt of its batch)
+    wide, most = kn.wide_substep.py_func, kn.MAX_SUBSTEPS
+    plan = np.array([most, most, 5, most, 2 * most], dtype=np.int64)
+    assert [wide(plan, k, plan.size, 0.01) for k in range(plan.size)] == [0.0, 0.01 / 5, 0.01 / 5, 0.01 / 5, 0.0]

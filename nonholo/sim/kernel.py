@@ -124,6 +124,8 @@ assert (E_MEAN, E_M2, E_SQ, E_MAX, E_FINAL, H_SUM, H_SQ, H_MAX, H_FINAL, V_PEAK,
 # (``Kernel.alone``), not in loops over the batch: a loop entered for one or two copies costs
 # LLVM's run-time overlap checks (tens of comparisons) at every step.
 ALONE_BELOW = 4
+# The most RK4 sub-steps per output step a plan asks for (``nonholo.sim.simulator.measured_plan``).
+MAX_SUBSTEPS = 1000
 # Which rates a lone root's time loop measures (``run_alone``): none, every RK4 stage's, or
 # the first stage's of each sub-step.
 MEASURE_NONE, MEASURE_STAGES, MEASURE_FIRST_STAGE = 0, 1, 2
@@ -342,18 +344,21 @@ def tracking_rate(omega):
 
 @njit(inline="always", **_OPTIONS)
 def wide_substep(substeps, k, n_steps, dt):
-    """dt over the fewest sub-steps of output step k and of its neighbours. A tracking root's
-    rate met in step k asks for sub-steps in steps k − 1, k and k + 1 (the simulator's
+    """dt over the fewest sub-steps of output step k and of its neighbours, leaving out those
+    at ``MAX_SUBSTEPS`` or more (0 if all are). A tracking root's rate met in step k asks for
+    sub-steps in steps k − 1, k and k + 1, never more than ``MAX_SUBSTEPS`` (the simulator's
     ``measured_plan``), so the largest ``tracking_rate`` × this over a copy's run (its
-    statistic ``STEP_RATE``) is within the plan's factor exactly when the plan gives the copy
-    every sub-step its own rates ask for: the simulator runs again only the copies of a batch
-    that are short."""
-    m = substeps[k]
-    if k > 0:
-        m = min(m, substeps[k - 1])
-    if k + 1 < n_steps:
-        m = min(m, substeps[k + 1])
-    return dt / m
+    statistic ``STEP_RATE``) is within the plan's factor exactly (to rounding) when the plan
+    gives the copy every sub-step its own rates ask for: the simulator runs again only the
+    copies of a batch that are short."""
+    m = MAX_SUBSTEPS
+    if substeps[k] < m:
+        m = substeps[k]
+    if k > 0 and substeps[k - 1] < m:
+        m = substeps[k - 1]
+    if k + 1 < n_steps and substeps[k + 1] < m:
+        m = substeps[k + 1]
+    return dt / m if m < MAX_SUBSTEPS else 0.0
 
 
 @njit(inline="always", **_OPTIONS)

@@ -122,7 +122,8 @@ class SimulationResult:
     closest pair of each connected formation; ``record`` (rows, N+1, robots, members) when
     recorded (``nonholo.sim.kernel.REC_*``: the robot rows, then the link rows of a follower
     only when the scenario has followers); ``substeps`` (robots,) the most RK4 sub-steps per
-    output step used (over the members of a batch); ``rk4_steps`` the RK4 steps integrated
+    output step used (over the members of a batch; ``member_substeps`` (robots, members)
+    each member's own); ``rk4_steps`` the RK4 steps integrated
     over every robot of every member, runs again with more sub-steps included (what the
     sub-step plan cost: robots × output steps for one step each; 0 for ``solve_ivp``; for a
     fleet's trajectories, the steps its robots integrated on the plan they were given).
@@ -138,9 +139,12 @@ class SimulationResult:
     substeps: np.ndarray
     elapsed_s: float
     rk4_steps: int = 0
+    member_substeps: np.ndarray | None = None
     metrics: Metrics = field(init=False, repr=False)
 
     def __post_init__(self):
+        if self.member_substeps is None:
+            object.__setattr__(self, "member_substeps", np.repeat(self.substeps[:, None], len(self.scenarios), axis=1))
         stats = self.stats[:, :, 0] if len(self.scenarios) == 1 else self.stats
         object.__setattr__(self, "metrics", Metrics.from_stats(stats, self.t.size, float(self.t[-1])))
 
@@ -330,7 +334,7 @@ class SimulationResult:
         start = [float(v) for v in (self.record[:3, 0, i, member] if self.record is not None else
                                     self.scenarios[member].initial_poses()[i])]
         out = {"role": "leader" if isinstance(robot, Robot) else "follower", "start": start,
-               "substeps": int(self.substeps[i]), "control": self._control(i, member), "events": self._events(i, member)}
+               "substeps": int(self.member_substeps[i, member]), "control": self._control(i, member), "events": self._events(i, member)}
         if isinstance(robot, Robot):
             out.update(robot.controller.describe())
             if robot.posture:
@@ -349,7 +353,7 @@ class SimulationResult:
         scenario = self.scenarios[member]
         simulation = {"duration": float(self.t[-1]), "dt": scenario.dt, "steps": scenario.n_steps,
                       "method": scenario.method, "control_period": scenario.held_period,
-                      "max_substeps": int(self.substeps.max()), "rk4_steps": self.rk4_steps,
+                      "max_substeps": int(self.member_substeps[:, member].max()), "rk4_steps": self.rk4_steps,
                       "elapsed_s": self.elapsed_s,
                       "batch": len(self.scenarios)}
         if scenario.network is not None and not scenario.network.ideal:

@@ -3,7 +3,8 @@ arrays of ``nonholo.sim.kernel`` and integrates them with the compiled RK4, or w
 ``solve_ivp`` for cross-checks.
 
 **Groups.** A scenario's robots split into connected formations (a lone robot is one). The
-formations that share a structure (graph, laws, targets) and a sub-step plan are integrated
+formations that share a structure (graph, laws, targets) and a sub-step plan planned in
+advance from their own gains (members of a batch that differ in gains may not) are integrated
 together as one batch, copies along the kernel's batch axis: 10 000 lone robots under one
 law are one group of 10 000 copies of a one-robot graph. So a robot's result depends on the
 other formations it is simulated with only through the sub-steps planned from the rates the
@@ -60,7 +61,10 @@ STABLE_STEP_FACTOR = 0.5
 MEASURED_STEP_FACTOR = 0.05
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
-MAX_SUBSTEPS = 1000
+MAX_SUBSTEPS = kn.MAX_SUBSTEPS
+# A copy whose ``STEP_RATE`` is within this relative margin below its factor counts as short:
+# the kernel's rate × (dt/m) and ``measured_plan``'s ⌈rate·dt/factor⌉ round apart at ties.
+OWN_RATE_MARGIN = 1e-9
 # Runs of a window at most (the last stands), and the most its sub-steps grow from one run to
 # the next: an under-resolved run's rates overshoot (see plan_windows).
 PLAN_ATTEMPTS = 8
@@ -118,9 +122,18 @@ def stage_times(dt: float, plan: np.ndarray, k0: int = 0, k1: int | None = None)
 
 def prior_plan(scenario: Scenario, rate: float) -> np.ndarray:
     """Sub-steps per output step from the rates known in advance (see the module docstring)."""
+    base, refined = prior_parts(scenario, rate)
+    plan = np.full(scenario.n_steps, base, dtype=np.int64)
+    plan[:refined] = base * STARTUP_REFINEMENT
+    return plan
+
+
+def prior_parts(scenario: Scenario, rate: float) -> tuple[int, int]:
+    """``prior_plan`` as (sub-steps per output step, the first output steps that get
+    ``STARTUP_REFINEMENT`` times as many): equal parts, equal plans."""
     n_steps, dt = scenario.n_steps, scenario.dt
     if scenario.method != "rk4":
-        return np.ones(n_steps, dtype=np.int64)
+        return 1, 0
     if scenario.substeps is not None:
         step = dt / scenario.substeps
         if rate * step > RK4_STABILITY_LIMIT:
@@ -128,17 +141,14 @@ def prior_plan(scenario: Scenario, rate: float) -> np.ndarray:
                 f"substeps = {scenario.substeps} is unstable for this law: its fastest rate {rate:.3g} 1/s times "
                 f"the step {step:.3g} s exceeds RK4's stability limit {RK4_STABILITY_LIMIT}; use more substeps or "
                 "leave them automatic")
-        return np.full(n_steps, scenario.substeps, dtype=np.int64)
+        return scenario.substeps, 0
     needed = rate * dt / STABLE_STEP_FACTOR
     if not needed <= MAX_SUBSTEPS:  # also catches inf and nan
         raise NonholoInputError(
             f"the control law is too stiff for dt = {dt:g} s (fastest rate {rate:.3g} 1/s would need "
             f"{needed:.3g} sub-steps per step, at most {MAX_SUBSTEPS}): reduce dt or lower the gains")
     base = max(1, math.ceil(needed))
-    plan = np.full(n_steps, base, dtype=np.int64)
-    if base > 1:
-        plan[:math.ceil(STARTUP_TIME_CONSTANTS / rate / dt)] = base * STARTUP_REFINEMENT
-    return plan
+    return base, (min(math.ceil(STARTUP_TIME_CONSTANTS / rate / dt), n_steps) if base > 1 else 0)
 
 
 def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int = 0, k1: int | None = None,
@@ -338,45 +348,50 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     poses = [s.initial_poses() for s in scenarios]
     by_key = defaultdict(list)
     known: dict = {}
-    plans: dict[float, np.ndarray] = {}
+    plans: dict[tuple, np.ndarray] = {}
 
-    def describe(robots):
-        """A component's group key (laws, structure, plan) and its prior plan."""
+    def shape(robots):
+        """A component's root laws and structure (the same in every member: ``_check_batch``)."""
         laws = tuple(dict.fromkeys((r.controller.law, r.controller.controller.gain_tuple)
                                    for r in robots if isinstance(r, Robot)))
         if len(laws) > 2:
             raise NonholoInputError(f"robots {', '.join(r.name for r in robots if isinstance(r, Robot))} form one "
                                     "connected formation with more than two different root controllers (at most two)")
-        rate = _prior_rate(robots, v_peak, omega_peak, known)
-        if rate not in plans:   # one plan object per distinct plan: members of equal plans share a group
-            plan = prior_plan(first, rate)
-            plans[rate] = next((p for p in plans.values() if np.array_equal(p, plan)), plan)
-        prior = plans[rate]
         local = {robot.name: j for j, robot in enumerate(robots)}   # (``Scenario.names`` is built per call)
-        return (laws, tuple(_structure(r, local) for r in robots), id(prior)), prior
+        return laws, tuple(_structure(r, local) for r in robots)
 
-    lone: dict[tuple, tuple] = {}   # lone roots of one law, goal kind and prior rate describe alike
-    described: dict[tuple, tuple] = {}   # and those of one configuration object (a batch shares a few)
-    robots = first.robots
-    for component in first.components():
-        robot = robots[component[0]]
+    def plan_of(rate):
+        parts = prior_parts(first, rate)
+        if parts not in plans:   # one plan object per distinct plan: copies of equal plans share a group
+            plans[parts] = prior_plan(first, rate)
+        return plans[parts]
+
+    lone: dict[tuple, tuple] = {}   # lone roots of one law and goal kind have one shape
+    tagged: dict[tuple, tuple] = {}   # and those of one configuration object (a batch shares a few)
+    components, shapes = first.components(), []
+    for component in components:
+        robot = first.robots[component[0]]
         if len(component) == 1 and isinstance(robot, Robot):
             tag = (id(robot.controller), robot.goal is None)
-            if tag not in described:
-                key = (robot.controller.controller.gain_tuple, _structure(robot, {}),
-                       _prior_rate([robot], v_peak, omega_peak, known))
+            if tag not in tagged:
+                key = (robot.controller.controller.gain_tuple, _structure(robot, {}))
                 if key not in lone:
-                    lone[key] = describe([robot])
-                described[tag] = lone[key]
-            group_key, prior = described[tag]
+                    lone[key] = shape([robot])
+                tagged[tag] = lone[key]
+            shapes.append(tagged[tag])
         else:
-            group_key, prior = describe([robots[i] for i in component])
-        by_key[group_key].append((component, prior))
-    groups = []
-    for (laws, _, _), entries in by_key.items():
-        copies = [(member, component) for member in range(len(scenarios)) for component, _ in entries]
-        groups.append(Group(scenarios, copies, laws, entries[0][1], v_d0, poses))
-    return groups
+            shapes.append(shape([first.robots[i] for i in component]))
+    # Each copy (a component of a member) gets the plan of its own rates known in advance, as
+    # it would alone: members that differ in gains are grouped by their plans.
+    priors = {}
+    for member, scenario in enumerate(scenarios):
+        robots = scenario.robots
+        for component, (laws, structure) in zip(components, shapes):
+            prior = plan_of(_prior_rate([robots[i] for i in component], v_peak, omega_peak, known))
+            key = (laws, structure, id(prior))
+            priors[key] = prior
+            by_key[key].append((member, component))
+    return [Group(scenarios, copies, key[0], priors[key], v_d0, poses) for key, copies in by_key.items()]
 
 
 ON_DIVERGENCE = ("raise", "report")
@@ -414,7 +429,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     pair_stats = np.full((kn.PAIR_COUNT, len(first.components()), n_members), np.nan)
     rec_rows = kn.record_rows(bool(first.followers))   # no link rows without followers
     records = None if record else np.empty((rec_rows, 0, n_robots, n_members))
-    substeps = np.zeros(n_robots, dtype=np.int64)
+    substeps = np.zeros((n_robots, n_members), dtype=np.int64)   # each member's own
     component_of = {c[0]: k for k, c in enumerate(first.components())}
     reference_cache: dict[bytes, tuple] = {}
     rk4_steps = 0
@@ -437,7 +452,7 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         pair_stats[:, [component_of[indices[0]] for _, indices in group.copies], members] = g_pairs
         if record and records is not g_record:
             _merge_record(records, g_record, index, members)
-        np.maximum.at(substeps, index.ravel(), np.repeat(most, index.shape[1]))   # (copies index-major)
+        substeps[index, members[:, None]] = most[:, None]
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
     rows = None
@@ -445,7 +460,8 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         stage_rows, row_start, _ = next(iter(reference_cache.values()), (None, None, None))
         rows = _output_rows(stage_rows, row_start) if stage_rows is not None else first.reference.table(grid)
     return SimulationResult(scenarios=tuple(scenarios), t=grid, reference_rows=rows, stats=stats,
-                            pair_stats=pair_stats, record=records if record else None, substeps=substeps,
+                            pair_stats=pair_stats, record=records if record else None,
+                            substeps=substeps.max(axis=1), member_substeps=substeps,
                             elapsed_s=time.perf_counter() - started, rk4_steps=rk4_steps)
 
 
@@ -695,7 +711,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 if not short.any():
                     break
                 if not per_window:   # only the copies whose own rates asked for more run again
-                    own = stats[kn.STEP_RATE].max(axis=0) > group.rate_factor
+                    own = stats[kn.STEP_RATE].max(axis=0) > group.rate_factor * (1.0 - OWN_RATE_MARGIN)
                     if live is not None:
                         own[np.setdiff1d(np.arange(n_batch), live)] = False
                     if not own.any():
