@@ -349,6 +349,7 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     by_key = defaultdict(list)
     known: dict = {}
     plans: dict[tuple, np.ndarray] = {}
+    by_rate: dict[float, np.ndarray] = {}
 
     def shape(robots):
         """A component's root laws and structure (the same in every member: ``_check_batch``)."""
@@ -361,10 +362,12 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         return laws, tuple(_structure(r, local) for r in robots)
 
     def plan_of(rate):
-        parts = prior_parts(first, rate)
-        if parts not in plans:   # one plan object per distinct plan: copies of equal plans share a group
-            plans[parts] = prior_plan(first, rate)
-        return plans[parts]
+        if rate not in by_rate:   # (copies of one configuration share a rate)
+            parts = prior_parts(first, rate)
+            if parts not in plans:   # one plan object per distinct plan: copies of equal plans share a group
+                plans[parts] = prior_plan(first, rate)
+            by_rate[rate] = plans[parts]
+        return by_rate[rate]
 
     lone: dict[tuple, tuple] = {}   # lone roots of one law and goal kind have one shape
     tagged: dict[tuple, tuple] = {}   # and those of one configuration object (a batch shares a few)
