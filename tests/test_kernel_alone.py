@@ -188,33 +188,40 @@ def test_score_alone_equals_the_batch_score(name):
     assert alone_stats[kn.SAT_V, 0, 0] + alone_stats[kn.SAT_W, 0, 0] > 0
 
 
+def lone_roots(integrate, config, states, dt, plan, recorded=False):
+    """Run the lone-root time loop ``integrate`` (``Kernel.alone`` or ``Kernel.roots``) of
+    ``config``'s law directly, for copies starting at ``states`` (4, copies) on sub-step
+    ``plan`` over the figure eight: (statistics, step_rate)."""
+    from nonholo.sim.simulator import stage_times
+    from nonholo.sim.targets import TABLE_COLUMNS
+
+    n, n_steps = states.shape[1], plan.size
+    times, row_start = stage_times(dt, plan)
+    fields = np.zeros((kn.MAX_FIELDS, 1, n))
+    fields[:len(config.gain_vector())] = np.array(config.gain_vector())[:, None, None]
+    stats, pair_stats = kn.new_stats(1, n)
+    rate = np.zeros(n_steps + 1)
+    integrate(states[:, None, :].copy(), fields, np.full((2, 1, n), np.inf), references.eight().table(times), row_start,
+              plan, np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, n)), np.full(1, kn.ROOT_A, np.int64),
+              np.zeros(1, np.int64), np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, n)), 1e-3,
+              np.zeros(n), 1.0, dt, 0, 0, n_steps, n_steps, stats, pair_stats,
+              np.empty((kn.REC_ROBOT_COUNT, n_steps + 1 if recorded else 0, 1, n)), np.zeros((kn.HELD_COUNT, 1, n)),
+              rate, False)
+    return stats, rate
+
+
 @pytest.mark.parametrize("recorded", [False, True])
 def test_a_nan_copy_does_not_hide_the_rates_of_its_chunk(recorded):
     """``Kernel.roots`` takes each step's largest rate over a chunk of copies (as integers):
     a copy whose state is NaN adds nothing, as in ``Kernel.alone``, instead of making the
     chunk's largest NaN and so dropping its other copies' rates (the sub-step plan would then
     miss them)."""
-    from nonholo.sim.targets import TABLE_COLUMNS
-
     config = controller("dynamic-feedback")
-    law, gains = config.law, config.gain_vector()
-    kernel = kernel_for(((law, config.controller.gain_tuple),), False)
+    kernel = kernel_for(((config.law, config.controller.gain_tuple),), False)
     n_steps, dt, copies = 3, 0.01, 9
-    rows = references.eight().table(np.arange(2 * n_steps + 3) * (dt / 2))
 
     def step_rate(states):
-        n = states.shape[1]
-        fields = np.zeros((kn.MAX_FIELDS, 1, n))
-        fields[:len(gains)] = np.array(gains)[:, None, None]
-        stats, pair_stats = kn.new_stats(1, n)
-        rate = np.zeros(n_steps + 1)
-        kernel.roots(states[:, None, :].copy(), fields, np.full((2, 1, n), np.inf), rows, 2 * np.arange(n_steps + 1),
-                     np.ones(n_steps, np.int64), np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, n)),
-                     np.full(1, kn.ROOT_A, np.int64), np.zeros(1, np.int64), np.full((2, 1), -1, np.int64),
-                     np.zeros(1, np.int64), np.zeros((1, n)), 1e-3, np.zeros(n), 1.0, dt, 0, 0, n_steps, n_steps,
-                     stats, pair_stats, np.empty((kn.REC_ROBOT_COUNT, n_steps + 1 if recorded else 0, 1, n)),
-                     np.zeros((kn.HELD_COUNT, 1, n)), rate, False)
-        return rate
+        return lone_roots(kernel.roots, config, states, dt, np.ones(n_steps, np.int64), recorded)[1]
 
     states = np.array([[0.3 * i, -0.2 * i, 0.4 * i, 0.5] for i in range(copies)]).T   # x, y, θ, ξ
     finite = step_rate(states[:, 1:])
@@ -233,30 +240,15 @@ def test_each_copy_keeps_its_own_check_of_the_sub_step_plan(plan):
     plan gives the copy every sub-step its own rates ask for (``measured_plan`` at f), which
     is how the simulator picks the copies of a batch to run again."""
     from nonholo.sim.simulator import measured_plan
-    from nonholo.sim.targets import TABLE_COLUMNS
 
     config = controller("dynamic-feedback", xi0=0.3)
-    law, gains = config.law, config.gain_vector()
-    kernel = kernel_for(((law, config.controller.gain_tuple),), False)
+    kernel = kernel_for(((config.law, config.controller.gain_tuple),), False)
     dt, copies = 0.01, 9
     plan = np.array(plan, dtype=np.int64)
     n_steps = plan.size
-    row_start = np.zeros(n_steps + 1, dtype=np.int64)
-    np.cumsum(2 * plan, out=row_start[1:])
-    times = np.concatenate([k * dt + np.arange(2 * m) * dt / (2 * m) for k, m in enumerate(plan)] + [[n_steps * dt]])
-    rows = references.eight().table(times)
 
     def run(states, integrate):
-        n = states.shape[1]
-        fields = np.zeros((kn.MAX_FIELDS, 1, n))
-        fields[:len(gains)] = np.array(gains)[:, None, None]
-        stats, pair_stats = kn.new_stats(1, n)
-        rate = np.zeros(n_steps + 1)
-        integrate(states[:, None, :].copy(), fields, np.full((2, 1, n), np.inf), rows, row_start, plan,
-                  np.zeros((1, len(TABLE_COLUMNS), 1)), np.zeros((2, 1, n)), np.full(1, kn.ROOT_A, np.int64),
-                  np.zeros(1, np.int64), np.full((2, 1), -1, np.int64), np.zeros(1, np.int64), np.zeros((1, n)),
-                  1e-3, np.zeros(n), 1.0, dt, 0, 0, n_steps, n_steps, stats, pair_stats,
-                  np.empty((kn.REC_ROBOT_COUNT, 0, 1, n)), np.zeros((kn.HELD_COUNT, 1, n)), rate, False)
+        stats, rate = lone_roots(integrate, config, states, dt, plan)
         return stats[kn.STEP_RATE, 0], rate
 
     states = np.array([[0.3 * i - 1.0, -0.2 * i, 0.7 * i, 0.3] for i in range(copies)]).T   # x, y, θ, ξ

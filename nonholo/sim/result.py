@@ -334,7 +334,8 @@ class SimulationResult:
         start = [float(v) for v in (self.record[:3, 0, i, member] if self.record is not None else
                                     self.scenarios[member].initial_poses()[i])]
         out = {"role": "leader" if isinstance(robot, Robot) else "follower", "start": start,
-               "substeps": int(self.member_substeps[i, member]), "control": self._control(i, member), "events": self._events(i, member)}
+               "substeps": int(self.member_substeps[i, member]), "control": self._control(i, member),
+               "events": self._events(i, member)}
         if isinstance(robot, Robot):
             out.update(robot.controller.describe())
             if robot.posture:

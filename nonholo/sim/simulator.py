@@ -682,6 +682,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                     rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, k0, k1)
                 copies = (state, fields, group.limits, group.offsets, branch, group.d_max, stats, pair_stats, records,
                           held)
+                n_live = n_batch if live is None else live.size
                 if live is not None:   # (contiguous copies of the copies run again)
                     copies = [np.ascontiguousarray(array[..., live]) for array in copies]
                 run_state, run_fields, run_limits, run_offsets, run_branch, run_d_max, *run_outputs = copies
@@ -693,7 +694,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 if whole:
                     integrate_linked(integrate, kernel.evaluate, args, scenario, group, outputs, show)
                 else:
-                    run = integrate if live is None else kernel.integrator(scenario.hold_every != 0, live.size)
+                    run = integrate if live is None else kernel.integrator(scenario.hold_every != 0, n_live)
                     for a, b in pieces:
                         run(*args, a, b, n_steps, *outputs, False)
                         if bar is not None:
@@ -703,7 +704,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                                            (run_state, run_branch, *run_outputs)):
                         array[..., live] = part
                 most[slice(None) if live is None else live] = plan.max()
-                rk4_steps += int(plan[k0:k1].sum()) * n_robots * (n_batch if live is None else live.size)
+                rk4_steps += int(plan[k0:k1].sum()) * n_robots * n_live
                 if attempt == attempts - 1:   # the last run stands (its plan is the one returned)
                     break
                 window = slice(k0, k1)
@@ -714,12 +715,11 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                 if not short.any():
                     break
                 if not per_window:   # only the copies whose own rates asked for more run again
-                    own = stats[kn.STEP_RATE].max(axis=0) > group.rate_factor * (1.0 - OWN_RATE_MARGIN)
-                    if live is not None:
-                        own[np.setdiff1d(np.arange(n_batch), live)] = False
-                    if not own.any():
+                    # (a copy that stood keeps the statistics of its accepted run: within its factor)
+                    live = np.flatnonzero(stats[kn.STEP_RATE].max(axis=0)
+                                          > group.rate_factor * (1.0 - OWN_RATE_MARGIN))
+                    if not live.size:
                         break
-                    live = np.flatnonzero(own)
                 for array, copy in zip((state, branch, stats, pair_stats, held), saved):
                     if live is None:
                         array[...] = copy
