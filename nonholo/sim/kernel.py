@@ -133,8 +133,8 @@ MEASURE_NONE, MEASURE_STAGES, MEASURE_FIRST_STAGE = 0, 1, 2
 # the whole time loop (``Kernel.roots``): their state and statistics stay in the core's caches.
 ROOTS_CHUNK = 128
 KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
-SLOPE_COUNT = 12   # what ``roots`` keeps of a copy's RK4 step between its stages: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇)
-RATE_ROW = SLOPE_COUNT   # and, in the row after them, its first stage's rate (``largest_rate``)
+SLOPE_COUNT = 4   # what ``roots`` keeps of a copy's RK4 stage for the next ones: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇) each
+RATE_ROW = SLOPE_COUNT   # and, in the row after k1's, its first stage's rate (``largest_rate``)
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_ERR1, REC_ERR2, REC_SINGULAR, REC_SATURATED, REC_OUT1,
@@ -995,13 +995,30 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
         return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
 
+    @njit(inline="always", **_OPTIONS)
+    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, k_out, peak):
+        """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2), at
+        t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3); the largest rate so far
+        (``peak``) when measuring. ``k_in`` and ``k_out`` are arrays of their own, arguments
+        of ``run_roots``: rows of one array chosen by a variable left LLVM unable to tell the
+        rows read from the rows written, and the loop ran 2.7x slower."""
+        for b in range(c0, c1):
+            i = b - c0
+            x, y = state[0, r, b] + half * k_in[0, i], state[1, r, b] + half * k_in[1, i]
+            theta, xi = state[2, r, b] + half * k_in[2, i], state[3, r, b] + half * k_in[3, i]
+            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, ref)
+            k_out[0, i], k_out[1, i], k_out[2, i], k_out[3, i] = dx, dy, dtheta, dxi
+            if measuring:
+                peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+        return peak
+
     @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
     def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                  n_steps, stats, record, step_rate, sample, slope):
+                  n_steps, stats, record, step_rate, sample, slope, k2, k3):
         """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned). An RK4 step runs
-        stage by stage, one loop over the copies each, ``slope`` keeping each copy's k1, k2,
-        k3 (rows 0–3, 4–7, 8–11: ẋ, ẏ, θ̇, ξ̇) for the next stages, and its first stage's
-        rate (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
+        stage by stage, one loop over the copies each, ``slope``, ``k2`` and ``k3`` keeping
+        each copy's k1, k2, k3 (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``slope`` its
+        first stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
         short enough for the processor to overlap the dependent chains of successive copies,
         which a body of all four stages (longer than its reorder window) was not. The same
         operations as ``root_rk4``, in the same order."""
@@ -1055,35 +1072,18 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     if not measuring:
                         keep_step_rate(stats, r, c0, c1, slope, wide)
                     peak = largest_rate(slope, np.int64(c1 - c0))
-                # Stages 2 and 3 are written out, their rows of ``slope`` literal: with the rows as
-                # variables (one loop over both stages, or a helper taking them) LLVM cannot tell
-                # the rows read from the rows written, and the loop ran 2.7x slower.
-                for b in range(c0, c1):   # stage 2: from x + h/2 k1, at t + h/2
-                    i = b - c0
-                    x, y = state[0, r, b] + half * slope[0, i], state[1, r, b] + half * slope[1, i]
-                    theta, xi = state[2, r, b] + half * slope[2, i], state[3, r, b] + half * slope[3, i]
-                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r1)
-                    slope[4, i], slope[5, i], slope[6, i], slope[7, i] = dx, dy, dtheta, dxi
-                    if measuring:
-                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                for b in range(c0, c1):   # stage 3: from x + h/2 k2, at t + h/2
-                    i = b - c0
-                    x, y = state[0, r, b] + half * slope[4, i], state[1, r, b] + half * slope[5, i]
-                    theta, xi = state[2, r, b] + half * slope[6, i], state[3, r, b] + half * slope[7, i]
-                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r1)
-                    slope[8, i], slope[9, i], slope[10, i], slope[11, i] = dx, dy, dtheta, dxi
-                    if measuring:
-                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, slope, k2, peak)
+                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, k3, peak)
                 for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
                     i = b - c0
                     x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    x, y, theta, xi = x0 + h * slope[8, i], y0 + h * slope[9, i], theta0 + h * slope[10, i], \
-                        xi0 + h * slope[11, i]
+                    x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
+                        xi0 + h * k3[3, i]
                     dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r2)
-                    state[0, r, b] = rk4_sum(x0, sixth, slope[0, i], slope[4, i], slope[8, i], dx)
-                    state[1, r, b] = rk4_sum(y0, sixth, slope[1, i], slope[5, i], slope[9, i], dy)
-                    state[2, r, b] = rk4_sum(theta0, sixth, slope[2, i], slope[6, i], slope[10, i], dtheta)
-                    state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], slope[7, i], slope[11, i], dxi)
+                    state[0, r, b] = rk4_sum(x0, sixth, slope[0, i], k2[0, i], k3[0, i], dx)
+                    state[1, r, b] = rk4_sum(y0, sixth, slope[1, i], k2[1, i], k3[1, i], dy)
+                    state[2, r, b] = rk4_sum(theta0, sixth, slope[2, i], k2[2, i], k3[2, i], dtheta)
+                    state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], k2[3, i], k3[3, i], dxi)
                     if measuring:
                         peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                 step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
@@ -1100,6 +1100,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         n_batch = state.shape[2]
         sample = np.empty((KEPT_COUNT, min(ROOTS_CHUNK, n_batch)))
         slope = np.empty((SLOPE_COUNT + 1, min(ROOTS_CHUNK, n_batch)))
+        k2, k3 = np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch))), np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch)))
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
@@ -1107,7 +1108,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 # would stop it vectorizing the loop over them
                 c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
                 run_roots(np.int64(r), c0, c1, state, fields, limits, rows, row_start, substeps, float(xi_speed),
-                          float(dt), *span, stats, record, step_rate, sample, slope)
+                          float(dt), *span, stats, record, step_rate, sample, slope, k2, k3)
 
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
