@@ -102,6 +102,20 @@ def test_the_result_holds_the_reference_at_the_output_instants(substeps):
     assert shared == (substeps in (None, 1)) == (result.reference_rows.strides[0] == 160)
 
 
+@pytest.mark.parametrize("plan, window", [(np.full(7, 1), (0, 7)), (np.full(9, 3), (2, 6)),
+                                          (np.array([20, 20, 4, 1, 1, 1, 7, 1000, 2]), (0, 9)),
+                                          (np.array([20, 20, 4, 1, 1, 1, 7, 1000, 2]), (3, 8))])
+def test_stage_times_are_k_dt_plus_half_sub_steps(plan, window):
+    """Each stage row's time is k·dt + j·(dt/(2m)) for the j-th half sub-step of output step k,
+    bit for bit (a row's time does not depend on the rest of the plan), then k1·dt; rows are
+    numbered from the window's first, and ``row_start`` is the whole plan's."""
+    dt, (k0, k1) = 0.013, window
+    times, row_start = stage_times(dt, plan, k0, k1)
+    expected = [k * dt + j * (dt / (2 * m)) for k, m in zip(range(k0, k1), plan[k0:k1]) for j in range(2 * m)]
+    assert times.tolist() == expected + [k1 * dt]
+    assert row_start.tolist() == [0, *np.cumsum(2 * plan).tolist()]
+
+
 def test_stiff_cascaded_law_is_substepped():
     result = simulate(Scenario(references.sinusoid(), [Robot("r", controller("cascaded"))], duration=5.0, dt=0.01))
     assert result.substeps[0] >= 5 and math.isfinite(result.metrics.error_mean[0])

@@ -247,6 +247,23 @@ def pair_command(x, y, theta, p1x, p1y, p1theta, p1v, p2x, p2y, p2theta, p2v, l1
     return v, omega, sat_v, sat_w, singular, cos_t, sin_t, l1, l2, l1_dot, l2_dot, sin_difference
 
 
+@njit(cache=True, error_model="numpy", fastmath=False)
+def fill_stage_times(dt, plan, k0, k1, times):
+    """``times`` (``plan``'s rows of output steps k0 … k1 − 1, then the sample at k1): the
+    j-th half sub-step of output step k at k·dt + j·(dt/(2m)), m = plan[k], then k1·dt.
+    IEEE arithmetic, the numbers numpy gives for the same expressions; one pass, where
+    numpy's broadcast sum over rows of two (one sub-step) took 5 ns a time."""
+    row = 0
+    for k in range(k0, k1):
+        rows = 2 * plan[k]
+        half_substep = dt / rows
+        start = k * dt
+        for j in range(rows):
+            times[row] = start + j * half_substep
+            row += 1
+    times[row] = k1 * dt
+
+
 @njit(inline="always", **_OPTIONS)
 def rk4_sum(value, sixth, k1, k2, k3, k4):
     """The classical RK4 combination value + h/6 (k1 + 2 k2 + 2 k3 + k4)."""

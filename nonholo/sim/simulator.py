@@ -106,17 +106,8 @@ def stage_times(dt: float, plan: np.ndarray, k0: int = 0, k1: int | None = None)
     instants are k·dt exactly."""
     k1 = plan.size if k1 is None else k1
     row_start = plan_rows(plan)
-    part = plan[k0:k1]
     times = np.empty(row_start[k1] - row_start[k0] + 1)
-    if (part == part[0]).all():   # uniform: the same numbers, without temporaries the size of the table
-        m = int(part[0])
-        np.add((np.arange(k0, k1) * dt)[:, None], (np.arange(2 * m) * (dt / (2 * m)))[None, :],
-               out=times[:-1].reshape(k1 - k0, 2 * m))
-    else:
-        step_of_row = np.repeat(np.arange(k0, k1), 2 * part)
-        offset = np.arange(times.size - 1) - (row_start[step_of_row] - row_start[k0])
-        times[:-1] = step_of_row * dt + offset * (dt / (2 * plan[step_of_row]))
-    times[-1] = k1 * dt
+    kn.fill_stage_times(float(dt), plan, k0, k1, times)
     return times, row_start
 
 
