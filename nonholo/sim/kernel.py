@@ -1127,6 +1127,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 run_roots(np.int64(r), c0, c1, state, fields, limits, rows, row_start, substeps, float(xi_speed),
                           float(dt), *span, stats, record, step_rate, sample, slope, k2, k3)
 
+    roots.time_loop = run_roots   # (its compiled code, for a look at it: docs/performance.md)
+
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
     # two kernels up (see stable_cache_identity).
