@@ -379,19 +379,19 @@ def wide_substep(substeps, k, n_steps, dt):
 
 
 @njit(inline="always", **_OPTIONS)
-def largest_rate(slope, n):
-    """The largest of the first n rates in row ``RATE_ROW`` of ``slope`` (not negative and not
+def largest_rate(k1, n):
+    """The largest of the first n rates in row ``RATE_ROW`` of ``k1`` (not negative and not
     NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a maximum of their bit
     patterns as integers, which order non-negative floats as their values do and which LLVM
     vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
     loop holding it ran 2.5x slower. The largest is written back to the row's first slot and
     read there as the float it is."""
-    bits = slope[RATE_ROW].view(np.int64)
+    bits = k1[RATE_ROW].view(np.int64)
     largest = bits[0]
     for i in range(1, n):
         largest = max(largest, bits[i])
     bits[0] = largest
-    return slope[RATE_ROW, 0]
+    return k1[RATE_ROW, 0]
 
 
 @njit(inline="always", **_OPTIONS)
@@ -996,12 +996,12 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))
 
     @njit(inline="always", **_OPTIONS)
-    def keep_step_rate(stats, r, c0, c1, slope, wide):
-        """Each copy's ``STEP_RATE``: the largest of its rates (``slope``'s row ``RATE_ROW``,
+    def keep_step_rate(stats, r, c0, c1, k1, wide):
+        """Each copy's ``STEP_RATE``: the largest of its rates (``k1``'s row ``RATE_ROW``,
         before ``largest_rate`` overwrites its first slot) times ``wide_substep``. A loop of
         its own: in the stage's loop the load and store cost the kernel ~5 %."""
         for b in range(c0, c1):
-            stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], slope[RATE_ROW, b - c0] * wide)
+            stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], k1[RATE_ROW, b - c0] * wide)
 
     @njit(inline="always", **_OPTIONS)
     def root_stage(r, b, fields, limits, x, y, theta, xi, ref):
@@ -1031,11 +1031,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
 
     @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
     def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                  n_steps, stats, record, step_rate, sample, slope, k2, k3):
+                  n_steps, stats, record, step_rate, sample, k1, k2, k3):
         """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned). An RK4 step runs
-        stage by stage, one loop over the copies each, ``slope``, ``k2`` and ``k3`` keeping
-        each copy's k1, k2, k3 (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``slope`` its
-        first stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
+        stage by stage, one loop over the copies each, ``k1``, ``k2`` and ``k3`` keeping each
+        copy's stage rates (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``k1`` its first
+        stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
         short enough for the processor to overlap the dependent chains of successive copies,
         which a body of all four stages (longer than its reorder window) was not. The same
         operations as ``root_rk4``, in the same order."""
@@ -1067,29 +1067,29 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, xi, r0)
-                        slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
+                        k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
-                        slope[RATE_ROW, i] = tracking_rate(omega)
-                    keep_step_rate(stats, r, c0, c1, slope, wide)
-                    peak = largest_rate(slope, np.int64(c1 - c0))
+                        k1[RATE_ROW, i] = tracking_rate(omega)
+                    keep_step_rate(stats, r, c0, c1, k1, wide)
+                    peak = largest_rate(k1, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, xi, r0)
-                        slope[0, i], slope[1, i], slope[2, i], slope[3, i] = dx, dy, dtheta, dxi
+                        k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                         if measuring:
-                            slope[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                            k1[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                         else:
-                            slope[RATE_ROW, i] = tracking_rate(omega)
+                            k1[RATE_ROW, i] = tracking_rate(omega)
                     if not measuring:
-                        keep_step_rate(stats, r, c0, c1, slope, wide)
-                    peak = largest_rate(slope, np.int64(c1 - c0))
-                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, slope, k2, peak)
+                        keep_step_rate(stats, r, c0, c1, k1, wide)
+                    peak = largest_rate(k1, np.int64(c1 - c0))
+                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, k2, peak)
                 peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, k3, peak)
                 for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
                     i = b - c0
@@ -1097,10 +1097,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
                         xi0 + h * k3[3, i]
                     dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r2)
-                    state[0, r, b] = rk4_sum(x0, sixth, slope[0, i], k2[0, i], k3[0, i], dx)
-                    state[1, r, b] = rk4_sum(y0, sixth, slope[1, i], k2[1, i], k3[1, i], dy)
-                    state[2, r, b] = rk4_sum(theta0, sixth, slope[2, i], k2[2, i], k3[2, i], dtheta)
-                    state[3, r, b] = rk4_sum(xi0, sixth, slope[3, i], k2[3, i], k3[3, i], dxi)
+                    state[0, r, b] = rk4_sum(x0, sixth, k1[0, i], k2[0, i], k3[0, i], dx)
+                    state[1, r, b] = rk4_sum(y0, sixth, k1[1, i], k2[1, i], k3[1, i], dy)
+                    state[2, r, b] = rk4_sum(theta0, sixth, k1[2, i], k2[2, i], k3[2, i], dtheta)
+                    state[3, r, b] = rk4_sum(xi0, sixth, k1[3, i], k2[3, i], k3[3, i], dxi)
                     if measuring:
                         peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                 step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
@@ -1115,9 +1115,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         call each), not a compiled one: a compiled caller optimized and generated
         ``run_roots``'s code a second time (2 s of a fresh install's compiling per law)."""
         n_batch = state.shape[2]
-        sample = np.empty((KEPT_COUNT, min(ROOTS_CHUNK, n_batch)))
-        slope = np.empty((SLOPE_COUNT + 1, min(ROOTS_CHUNK, n_batch)))
-        k2, k3 = np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch))), np.empty((SLOPE_COUNT, min(ROOTS_CHUNK, n_batch)))
+        width = min(ROOTS_CHUNK, n_batch)
+        sample, k1 = np.empty((KEPT_COUNT, width)), np.empty((SLOPE_COUNT + 1, width))
+        k2, k3 = np.empty((SLOPE_COUNT, width)), np.empty((SLOPE_COUNT, width))
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
@@ -1125,7 +1125,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 # would stop it vectorizing the loop over them
                 c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
                 run_roots(np.int64(r), c0, c1, state, fields, limits, rows, row_start, substeps, float(xi_speed),
-                          float(dt), *span, stats, record, step_rate, sample, slope, k2, k3)
+                          float(dt), *span, stats, record, step_rate, sample, k1, k2, k3)
 
     roots.time_loop = run_roots   # (its compiled code, for a look at it: docs/performance.md)
 
