@@ -1075,6 +1075,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     keep_step_rate(stats, r, c0, c1, k1, wide)
                     peak = largest_rate(k1, np.int64(c1 - c0))
                 else:   # stage 1, its command kept for the sample (``add_samples``)
+                    # (the first lines of the two stage-1 loops as one inline function stopped
+                    # LLVM vectorizing both: 27 instead of 12 ns per robot-step)
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
