@@ -30,7 +30,7 @@ sub-steps than it ran is run again from its start (state, bearings, statistics a
 commands put back) with more — at most ``PLAN_GROWTH`` times as many per step at each attempt,
 since an under-resolved run's rates overshoot — until its rates are within its plan or after
 ``PLAN_ATTEMPTS`` runs (the last stands: a singular passage asks for more than
-``MAX_SUBSTEPS``). Only the windows that need it are run again: the 7-follower chain's
+``kernel.MAX_SUBSTEPS``). Only the windows that need it are run again: the 7-follower chain's
 start-up (3 400 rad/s in its first second) no longer re-runs the whole horizon. Each step's
 sub-steps also cover the rates of the steps beside it (``measured_plan``), except the last
 step of a window, which covers its own and its predecessor's: the next window's rates are
@@ -61,7 +61,6 @@ STABLE_STEP_FACTOR = 0.5
 MEASURED_STEP_FACTOR = 0.05
 STARTUP_TIME_CONSTANTS = 50.0
 STARTUP_REFINEMENT = 10
-MAX_SUBSTEPS = kn.MAX_SUBSTEPS
 # A copy whose ``STEP_RATE`` is within this relative margin below its factor counts as short:
 # the kernel's rate × (dt/m) and ``measured_plan``'s ⌈rate·dt/factor⌉ round apart at ties.
 OWN_RATE_MARGIN = 1e-9
@@ -134,10 +133,10 @@ def prior_parts(scenario: Scenario, rate: float) -> tuple[int, int]:
                 "leave them automatic")
         return scenario.substeps, 0
     needed = rate * dt / STABLE_STEP_FACTOR
-    if not needed <= MAX_SUBSTEPS:  # also catches inf and nan
+    if not needed <= kn.MAX_SUBSTEPS:  # also catches inf and nan
         raise NonholoInputError(
             f"the control law is too stiff for dt = {dt:g} s (fastest rate {rate:.3g} 1/s would need "
-            f"{needed:.3g} sub-steps per step, at most {MAX_SUBSTEPS}): reduce dt or lower the gains")
+            f"{needed:.3g} sub-steps per step, at most {kn.MAX_SUBSTEPS}): reduce dt or lower the gains")
     base = max(1, math.ceil(needed))
     return base, (min(math.ceil(STARTUP_TIME_CONSTANTS / rate / dt), n_steps) if base > 1 else 0)
 
@@ -157,7 +156,7 @@ def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int =
     else:
         widened[1:] = np.maximum(widened[1:], rate[:k1 - k0 - 1])
     needed = np.ceil(widened * dt / factor)
-    needed = np.clip(np.where(np.isfinite(needed), needed, MAX_SUBSTEPS), 1, MAX_SUBSTEPS).astype(np.int64)
+    needed = np.clip(np.where(np.isfinite(needed), needed, kn.MAX_SUBSTEPS), 1, kn.MAX_SUBSTEPS).astype(np.int64)
     return np.maximum(needed, prior[k0:k1])
 
 
