@@ -59,7 +59,11 @@ from collections import namedtuple
 
 import llvmlite.binding
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core.imputils import impl_ret_borrowed
+from numba.extending import intrinsic
+from numba.np.arrayobj import populate_array
 
 from nonholo.control.declare import GOAL_FIELDS
 from nonholo.control.formation import separation_bearing_law, separation_separation_law
@@ -135,6 +139,16 @@ ROOTS_CHUNK = 128
 KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
 SLOPE_COUNT = 4   # what ``roots`` keeps of a copy's RK4 stage for the next ones: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇) each
 RATE_ROW = SLOPE_COUNT   # and, in the row after k1's, its first stage's rate (``largest_rate``)
+# ``roots`` runs a chunk of copies in one workspace (``workspace_views``): the rows of its state,
+# statistics, fields and limits (copied in and out by ``roots``), then scratch rows: the sample
+# at t_k, the stage rates k1 (with RATE_ROW), k2, k3, and a stage's sin θ and cos θ. Rows of
+# ROOTS_CHUNK + 8 columns (a row 17 cache lines long, not a power of two: rows 1 KiB apart
+# shared the L1 cache's sets, and the kernel ran a third slower), the first 64-byte aligned.
+WORKSPACE_COUNTS = (4, STAT_COUNT, MAX_FIELDS, 2, KEPT_COUNT, SLOPE_COUNT + 1, SLOPE_COUNT, SLOPE_COUNT, 2)
+WORKSPACE_FIRST = tuple(int(n) for n in np.cumsum((0,) + WORKSPACE_COUNTS[:-1]))
+WORKSPACE_ROWS = sum(WORKSPACE_COUNTS)
+WORKSPACE_WIDTH = ROOTS_CHUNK + 8
+WORKSPACE_KEPT = 4   # the first four (state, statistics, fields, limits) hold the simulator's arrays
 CLOSEST, CLOSEST_T, CLOSEST_I, CLOSEST_J, BELOW_ANY = range(5)
 PAIR_COUNT = 5
 (REC_X, REC_Y, REC_THETA, REC_XI, REC_V, REC_OMEGA, REC_ERR1, REC_ERR2, REC_SINGULAR, REC_SATURATED, REC_OUT1,
@@ -183,6 +197,59 @@ def field_row(fields, r, b):
             fields[6, r, b], fields[7, r, b], fields[8, r, b], fields[9, r, b])
 
 
+def _workspace_rows(first: int, count: int, robot_axis: bool):
+    """A compiled function of a ``roots`` workspace (``WORKSPACE_ROWS`` × ``WORKSPACE_WIDTH``,
+    C order): its rows first … first + count − 1 as an array of their own, (count, 1,
+    ``WORKSPACE_WIDTH``) with ``robot_axis`` (indexed as the simulator's [row, robot, copy]
+    arrays), else (count, ``WORKSPACE_WIDTH``). Its shape and strides are constants of the
+    compiled code, where numpy-style slicing and reshaping would leave them run-time values:
+    every row of every such array then lies at a constant offset from the workspace's one
+    pointer, and the time loop addresses them all from one register (with a pointer per
+    row, most were kept on the stack and loaded again at every use)."""
+    shape = (count, 1, WORKSPACE_WIDTH) if robot_axis else (count, WORKSPACE_WIDTH)
+    steps = (WORKSPACE_WIDTH * 8, WORKSPACE_WIDTH * 8, 8) if robot_axis else (WORKSPACE_WIDTH * 8, 8)
+    result = types.Array(types.float64, len(shape), "C")
+
+    @intrinsic
+    def rows_of(typingctx, workspace):
+        def codegen(context, builder, signature, args):
+            source = context.make_array(signature.args[0])(context, builder, args[0])
+            view = context.make_array(result)(context, builder)
+            intp = context.get_value_type(types.intp)
+            populate_array(view, data=builder.gep(source.data, [ir.Constant(intp, first * WORKSPACE_WIDTH)]),
+                           shape=[ir.Constant(intp, n) for n in shape],
+                           strides=[ir.Constant(intp, n) for n in steps], itemsize=ir.Constant(intp, 8),
+                           meminfo=source.meminfo)
+            return impl_ret_borrowed(context, builder, result, view._getvalue())
+        return result(workspace), codegen
+    return rows_of
+
+
+# one view of the workspace for each of its parts, the first four indexed [row, robot, copy]
+_WORKSPACE_VIEWS = tuple(_workspace_rows(first, count, part < WORKSPACE_KEPT)
+                         for part, (first, count) in enumerate(zip(WORKSPACE_FIRST, WORKSPACE_COUNTS)))
+_VIEW_0, _VIEW_1, _VIEW_2, _VIEW_3, _VIEW_4, _VIEW_5, _VIEW_6, _VIEW_7, _VIEW_8 = _WORKSPACE_VIEWS
+
+
+@njit(inline="always", **_OPTIONS)
+def workspace_views(workspace):
+    """The parts of a ``roots`` workspace as the arrays its time loop reads: state, stats,
+    fields and limits (robot 0: one robot, ``ROOTS_CHUNK`` copies), the sample, k1, k2, k3
+    and the stage's sin θ and cos θ."""
+    return (_VIEW_0(workspace), _VIEW_1(workspace), _VIEW_2(workspace), _VIEW_3(workspace), _VIEW_4(workspace),
+            _VIEW_5(workspace), _VIEW_6(workspace), _VIEW_7(workspace), _VIEW_8(workspace))
+
+
+def new_workspace() -> np.ndarray:
+    """A zeroed ``roots`` workspace (``WORKSPACE_ROWS`` × ``WORKSPACE_WIDTH``), its first row
+    64-byte aligned, and so every row (numpy aligns to 16 bytes: a 512-bit load then spans
+    two cache lines)."""
+    size = WORKSPACE_ROWS * WORKSPACE_WIDTH
+    raw = np.zeros(size + 8)
+    skip = (-raw.ctypes.data % 64) // 8
+    return raw[skip:skip + size].reshape(WORKSPACE_ROWS, WORKSPACE_WIDTH)
+
+
 @njit(inline="always", **_OPTIONS)
 def row_values(rows, r):
     """Reference row r as a tuple of scalars (laws index it like an array)."""
@@ -206,12 +273,19 @@ def continuous_bearing(raw, previous):
     return previous + wrap_angle(raw - previous)
 
 
+@njit(inline="always", **_OPTIONS)
+def law_command(law, gains, x, y, theta, sin_t, cos_t, xi, ref, v_max, omega_max):
+    """A root's saturated command at one state, sin θ and cos θ given: (v, ω, ξ̇, singular,
+    sat v, sat ω). (Inlined at numba's level: its caller's arithmetic flags apply.)"""
+    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
+    v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
+    return v, omega, xi_dot, singular, sat_v, sat_w
+
+
 def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
     """A root's saturated command at one state: (v, ω, ξ̇, singular, sat v, sat ω, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
-    v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
-    v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
-    return v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t
+    return law_command(law, gains, x, y, theta, sin_t, cos_t, xi, ref, v_max, omega_max) + (cos_t, sin_t)
 
 
 @njit(cache=True, error_model="numpy", fastmath=False)   # followers: IEEE arithmetic (see make_kernel)
@@ -1004,49 +1078,69 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], k1[RATE_ROW, b - c0] * wide)
 
     @njit(inline="always", **_OPTIONS)
-    def root_stage(r, b, fields, limits, x, y, theta, xi, ref):
-        """Copy b of root r at one RK4 stage: its rates (ẋ, ẏ, θ̇, ξ̇) and command (v, ω,
-        singular, sat v, sat ω)."""
-        v, omega, xi_dot, singular, sat_v, sat_w, cos_t, sin_t = command(
-            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, xi, ref, limits[0, r, b], limits[1, r, b])
+    def root_stage(r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, ref):
+        """Copy b of root r at one RK4 stage (sin θ and cos θ given): its rates (ẋ, ẏ, θ̇, ξ̇)
+        and command (v, ω, singular, sat v, sat ω)."""
+        v, omega, xi_dot, singular, sat_v, sat_w = law_command(
+            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, sin_t, cos_t, xi, ref, limits[0, r, b],
+            limits[1, r, b])
         dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
         return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
 
     @njit(inline="always", **_OPTIONS)
-    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, k_out, peak):
+    def stage_headings(r, c0, c1, state, step, k_in, trig):
+        """sin θ and cos θ at RK4 stage 2, 3 or 4 (θ + step·k_in[θ]) of copies c0 … c1 − 1 of
+        root r, into ``trig``'s rows 0 and 1, for the stage's own loop. A loop of its own:
+        the sin/cos is half of a stage's dependent chain, and the processor overlaps fewer
+        copies of a longer chain (``docs/performance.md``: the kernel ran 4 % faster). Stage
+        1 keeps its sin/cos in its loop (with the sample's statistics there, apart it was
+        2 % slower)."""
+        for b in range(c0, c1):
+            i = b - c0
+            trig[0, i], trig[1, i] = sincos(state[2, r, b] + step * k_in[2, i])
+
+    @njit(inline="always", **_OPTIONS)
+    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, k_out, peak, trig):
         """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2), at
         t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3); the largest rate so far
         (``peak``) when measuring. ``k_in`` and ``k_out`` are arrays of their own, arguments
         of ``run_roots``: rows of one array chosen by a variable left LLVM unable to tell the
         rows read from the rows written, and the loop ran 2.7x slower."""
+        stage_headings(r, c0, c1, state, half, k_in, trig)
         for b in range(c0, c1):
             i = b - c0
             x, y = state[0, r, b] + half * k_in[0, i], state[1, r, b] + half * k_in[1, i]
             theta, xi = state[2, r, b] + half * k_in[2, i], state[3, r, b] + half * k_in[3, i]
-            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, ref)
+            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[0, i],
+                                                                trig[1, i], xi, ref)
             k_out[0, i], k_out[1, i], k_out[2, i], k_out[3, i] = dx, dy, dtheta, dxi
             if measuring:
                 peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
         return peak
 
     @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
-    def run_roots(r, c0, c1, state, fields, limits, rows, row_start, substeps, xi_speed, dt, k_start, k_stop,
-                  n_steps, stats, record, step_rate, sample, k1, k2, k3):
-        """``roots``' time loop for robot r, copies c0 … c1 − 1 (unsigned). An RK4 step runs
+    def run_roots(workspace, c1, rows, row_start, substeps, xi_speed, dt, k_start, k_stop, n_steps, record,
+                  step_rate):
+        """``roots``' time loop for the first c1 copies (unsigned) of one robot, held in
+        ``workspace`` (``new_workspace``; its parts named as ``workspace_views`` names them),
+        ``record`` the robot's and copies' slice of the record. An RK4 step runs
         stage by stage, one loop over the copies each, ``k1``, ``k2`` and ``k3`` keeping each
         copy's stage rates (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``k1`` its first
         stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
         short enough for the processor to overlap the dependent chains of successive copies,
         which a body of all four stages (longer than its reorder window) was not. The same
         operations as ``root_rk4``, in the same order."""
+        r, c0 = 0, np.uint64(0)   # (robot 0 and copy 0 of the workspace's arrays)
+        state, stats, fields, limits, sample, k1, k2, k3, trig = workspace_views(workspace)
         for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
             row = row_start[k]
             if k == n_steps:   # the last sample's command is no RK4 stage: the law alone
                 ref = row_values(rows, row)
                 for b in range(c0, c1):
                     x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, xi,
-                                                                               ref)
+                    sin_t, cos_t = sincos(theta)
+                    _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, sin_t,
+                                                                               cos_t, xi, ref)
                     keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                 add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, step_rate)
                 break
@@ -1065,8 +1159,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        sin_t, cos_t = sincos(theta)
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
-                                                                                            theta, xi, r0)
+                                                                                            theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
@@ -1080,8 +1175,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        sin_t, cos_t = sincos(theta)
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
-                                                                                            theta, xi, r0)
+                                                                                            theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                         if measuring:
@@ -1091,14 +1187,16 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     if not measuring:
                         keep_step_rate(stats, r, c0, c1, k1, wide)
                     peak = largest_rate(k1, np.int64(c1 - c0))
-                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, k2, peak)
-                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, k3, peak)
+                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, k2, peak, trig)
+                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, k3, peak, trig)
+                stage_headings(r, c0, c1, state, h, k3, trig)
                 for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
                     i = b - c0
                     x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
                     x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
                         xi0 + h * k3[3, i]
-                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, xi, r2)
+                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[0, i],
+                                                                        trig[1, i], xi, r2)
                     state[0, r, b] = rk4_sum(x0, sixth, k1[0, i], k2[0, i], k3[0, i], dx)
                     state[1, r, b] = rk4_sum(y0, sixth, k1[1, i], k2[1, i], k3[1, i], dy)
                     state[2, r, b] = rk4_sum(theta0, sixth, k1[2, i], k2[2, i], k3[2, i], dtheta)
@@ -1113,21 +1211,26 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
               branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
               record, held, step_rate, held_given):
         """``integrate`` (same arguments) for lone roots under continuous-time control:
-        ``run_roots`` over ``ROOTS_CHUNK`` copies at a time. A Python loop over the chunks (a
-        call each), not a compiled one: a compiled caller optimized and generated
-        ``run_roots``'s code a second time (2 s of a fresh install's compiling per law)."""
+        ``run_roots`` over ``ROOTS_CHUNK`` copies at a time, each chunk's rows copied into a
+        workspace and back. A Python loop over the chunks (a call each), not a compiled one: a
+        compiled caller optimized and generated ``run_roots``'s code a second time (2 s of a
+        fresh install's compiling per law)."""
         n_batch = state.shape[2]
-        width = min(ROOTS_CHUNK, n_batch)
-        sample, k1 = np.empty((KEPT_COUNT, width)), np.empty((SLOPE_COUNT + 1, width))
-        k2, k3 = np.empty((SLOPE_COUNT, width)), np.empty((SLOPE_COUNT, width))
+        workspace = new_workspace()
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
-                # unsigned copy indices: no negative-index wrap-around for LLVM to keep, which
-                # would stop it vectorizing the loop over them
-                c0, c1 = np.uint64(start), np.uint64(min(start + ROOTS_CHUNK, n_batch))
-                run_roots(np.int64(r), c0, c1, state, fields, limits, rows, row_start, substeps, float(xi_speed),
-                          float(dt), *span, stats, record, step_rate, sample, k1, k2, k3)
+                stop = min(start + ROOTS_CHUNK, n_batch)
+                columns = (slice(None), r, slice(start, stop))
+                kept = tuple(zip(WORKSPACE_FIRST, WORKSPACE_COUNTS, (state, stats, fields, limits)))
+                for first, count, array in kept:
+                    workspace[first:first + count, :stop - start] = array[columns]
+                # the copy count unsigned: no negative-index wrap-around for LLVM to keep, which
+                # would stop it vectorizing the loops over the copies
+                run_roots(workspace, np.uint64(stop - start), rows, row_start, substeps, float(xi_speed), float(dt),
+                          *span, record[:, :, r:r + 1, start:stop], step_rate)
+                for first, count, array in kept[:2]:   # (fields and limits are only read)
+                    array[columns] = workspace[first:first + count, :stop - start]
 
     roots.time_loop = run_roots   # (its compiled code, for a look at it: docs/performance.md)
 
