@@ -377,12 +377,20 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     # Each copy (a component of a member) gets the plan of its own rates known in advance, as
     # it would alone: members that differ in gains are grouped by their plans.
     priors = {}
+    lone_keys: dict[tuple, tuple] = {}   # a lone root's key, by its shape and configuration object
     for member, scenario in enumerate(scenarios):
         robots = scenario.robots
-        for component, (laws, structure) in zip(components, shapes):
-            prior = plan_of(_prior_rate([robots[i] for i in component], v_peak, omega_peak, known))
-            key = (laws, structure, id(prior))
-            priors[key] = prior
+        for component, laws_structure in zip(components, shapes):
+            robot = robots[component[0]]
+            tag = (id(laws_structure), id(robot.controller)) if len(component) == 1 and isinstance(robot, Robot) \
+                else None
+            key = lone_keys.get(tag) if tag else None
+            if key is None:
+                prior = plan_of(_prior_rate([robots[i] for i in component], v_peak, omega_peak, known))
+                key = (*laws_structure, id(prior))
+                priors[key] = prior
+                if tag:
+                    lone_keys[tag] = key
             by_key[key].append((member, component))
     return [Group(scenarios, copies, key[0], priors[key], v_d0, poses) for key, copies in by_key.items()]
 
