@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from numba import literal_unroll, njit
 
 from nonholo import references
 from nonholo.control.registry import CONTROLLERS, POSTURE_CONTROLLERS, controller
@@ -100,6 +101,42 @@ def test_batches_past_one_chunk_integrate_every_copy_alike(name, substeps):
         assert np.allclose(scored[rows, 0, 0], many.stats[rows, 0, i], rtol=1e-12, atol=1e-12)
     # and the copies differ (a chunk that ran one copy's state for another would not)
     assert not np.allclose(many.record[kn.REC_X, -1, 0, 0], many.record[kn.REC_X, -1, 0, copies - 1])
+
+
+@njit
+def _mark(workspace):
+    """Every element of each part of ``workspace_views`` set to 100 × part + its row, written
+    through the views (their shapes as compiled)."""
+    views = kn.workspace_views(workspace)
+    shapes = []
+    for part in literal_unroll((0, 1, 2, 3, 4, 5, 6, 7, 8)):
+        view = views[part]
+        shapes.append(view.shape[0] * 1000 + view.shape[-1])
+        for row in range(view.shape[0]):
+            view[row] = 100.0 * part + row
+    return shapes
+
+
+def test_the_roots_workspace_is_aligned_and_its_parts_tile_it_row_by_row():
+    # ``run_roots`` reads a chunk's state, statistics, fields, limits and scratch rows through
+    # views whose shapes are constants of the compiled code: each must be its own rows of the
+    # workspace (none overlapping, none missed), in order, each row 64-byte aligned
+    workspace = kn.new_workspace()
+    assert workspace.shape == (kn.WORKSPACE_ROWS, kn.WORKSPACE_WIDTH) and workspace.flags.c_contiguous
+    assert workspace.ctypes.data % 64 == 0 and workspace.strides[0] % 64 == 0
+    assert kn.WORKSPACE_WIDTH >= kn.ROOTS_CHUNK and not (workspace.strides[0] & (workspace.strides[0] - 1)) == 0
+    shapes = _mark(workspace)
+    assert shapes == [count * 1000 + kn.WORKSPACE_WIDTH for count in kn.WORKSPACE_COUNTS]
+    expected = np.concatenate([100.0 * part + np.arange(count) for part, count in enumerate(kn.WORKSPACE_COUNTS)])
+    assert np.array_equal(workspace, np.repeat(expected[:, None], kn.WORKSPACE_WIDTH, axis=1))
+    # the first four are indexed as the simulator's arrays, [row, robot 0, copy]
+    views = [np.asarray(v) for v in _views(workspace)]
+    assert [v.ndim for v in views] == [3] * kn.WORKSPACE_KEPT + [2] * (len(views) - kn.WORKSPACE_KEPT)
+
+
+@njit
+def _views(workspace):
+    return kn.workspace_views(workspace)
 
 
 @pytest.mark.parametrize("name", sorted(CONTROLLERS))
