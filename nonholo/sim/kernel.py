@@ -273,10 +273,9 @@ def continuous_bearing(raw, previous):
     return previous + wrap_angle(raw - previous)
 
 
-@njit(inline="always", **_OPTIONS)
 def law_command(law, gains, x, y, theta, sin_t, cos_t, xi, ref, v_max, omega_max):
     """A root's saturated command at one state, sin θ and cos θ given: (v, ω, ξ̇, singular,
-    sat v, sat ω). (Inlined at numba's level: its caller's arithmetic flags apply.)"""
+    sat v, sat ω)."""
     v_raw, omega_raw, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
     v, omega, sat_v, sat_w = saturate(v_raw, omega_raw, v_max, omega_max)
     return v, omega, xi_dot, singular, sat_v, sat_w
@@ -379,10 +378,19 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
 # variants of each, one per kernel kind (lone roots fuse multiply-adds, graphs with
 # followers and the solver-step study do not, see ``make_kernel``); not cached on their own
 # (the kernels that call them are, with their code inside).
+# ``law_command`` (called by both, and by ``Kernel.roots`` with sin/cos of its own) has no
+# arithmetic of its own to fuse, only the limits' comparisons: one variant serves both.
+# ``stage_sincos`` is ``sincos`` as the lone roots' kernels compile it (fused multiply-adds:
+# the same numbers as in their ``root_command``), for ``Kernel.roots``'s time loop: inlined
+# by numba, its code was copied into that loop at each of six call sites (1.5 s more of a
+# fresh install's compiling per law).
+law_command = njit(error_model="numpy", fastmath=False)(law_command)
+stage_sincos = njit(error_model="numpy", fastmath={"contract"})(sincos.py_func)
 root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
 root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
-root_command_exact._set_uuid(f"{__name__}.root_command_exact")
-root_command._set_uuid(f"{__name__}.root_command")
+for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"),
+                         (root_command_exact, "root_command_exact"), (root_command, "root_command")):
+    _function._set_uuid(f"{__name__}.{_name}")
 
 
 def _make_root_rk4(command, fastmath):
@@ -1097,7 +1105,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         2 % slower)."""
         for b in range(c0, c1):
             i = b - c0
-            trig[0, i], trig[1, i] = sincos(state[2, r, b] + step * k_in[2, i])
+            trig[0, i], trig[1, i] = stage_sincos(state[2, r, b] + step * k_in[2, i])
 
     @njit(inline="always", **_OPTIONS)
     def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, k_out, peak, trig):
@@ -1138,7 +1146,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 ref = row_values(rows, row)
                 for b in range(c0, c1):
                     x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    sin_t, cos_t = sincos(theta)
+                    sin_t, cos_t = stage_sincos(theta)
                     _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, sin_t,
                                                                                cos_t, xi, ref)
                     keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
@@ -1159,7 +1167,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                        sin_t, cos_t = sincos(theta)
+                        sin_t, cos_t = stage_sincos(theta)
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
@@ -1175,7 +1183,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     for b in range(c0, c1):
                         i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                        sin_t, cos_t = sincos(theta)
+                        sin_t, cos_t = stage_sincos(theta)
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
