@@ -69,6 +69,25 @@ def sincos(x):
     return s, c
 
 
+# ``rotated_sincos``'s range, and its Taylor coefficients of sin d (d³ … d⁹) and cos d (d² … d¹⁰)
+ROTATION_MAX = 0.125
+_RS = (-1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0)
+_RC = (-0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0)
+
+
+@njit(inline="always", error_model="numpy")
+def rotated_sincos(sin_a, cos_a, d):
+    """(sin(a + d), cos(a + d)) from sin a and cos a, for |d| ≤ ``ROTATION_MAX``: the
+    angle-sum identities, with sin d and cos d by their Taylor series to d⁹ and d¹⁰
+    (truncated there below 3·10⁻¹⁷ relative). No reduction of the angle: 16 multiplies
+    instead of ``sincos``'s 21 and its selects. Within a few ulp of sin and cos of a + d;
+    NaN stays NaN. Outside its range it is not accurate: callers check |d| first."""
+    z = d * d
+    sin_d = d + d * (z * (_RS[0] + z * (_RS[1] + z * (_RS[2] + z * _RS[3]))))
+    cos_d = 1.0 + z * (_RC[0] + z * (_RC[1] + z * (_RC[2] + z * (_RC[3] + z * _RC[4]))))
+    return sin_a * cos_d + cos_a * sin_d, cos_a * cos_d - sin_a * sin_d
+
+
 _INV_TWO_PI = 1.0 / TWO_PI
 
 

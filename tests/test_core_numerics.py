@@ -6,7 +6,7 @@ import sympy as sp
 
 from nonholo.errors import ExpressionError
 from nonholo.expressions import parse_expression
-from nonholo.numerics import sinc_of, sincos, wrap_angle
+from nonholo.numerics import ROTATION_MAX, rotated_sincos, sinc_of, sincos, wrap_angle
 
 
 def test_sincos_matches_libm_to_a_few_ulp():
@@ -15,6 +15,27 @@ def test_sincos_matches_libm_to_a_few_ulp():
     assert np.max(np.abs(s - np.sin(x[::50]))) < 4e-16
     assert np.max(np.abs(c - np.cos(x[::50]))) < 4e-16
     assert sincos.py_func(1.5e6)[0] == pytest.approx(math.sin(1.5e6), abs=1e-12)
+
+
+def test_rotated_sincos_is_sin_and_cos_of_the_sum_to_a_few_ulp_within_its_range():
+    """sin(a + d), cos(a + d) from sin a and cos a (correctly rounded here) and d, against
+    40-digit values of the float a + d exactly; outside |d| ≤ ROTATION_MAX it is not accurate
+    (which is why the kernels check |d|)."""
+    import mpmath
+
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-60.0, 60.0, 1500)
+    d = rng.uniform(-ROTATION_MAX, ROTATION_MAX, a.size)
+    d[:5] = [0.0, -0.0, ROTATION_MAX, -ROTATION_MAX, 1e-300]
+    with mpmath.workdps(40):
+        exact = np.array([(float(mpmath.sin(mpmath.mpf(x) + mpmath.mpf(y))), float(mpmath.cos(mpmath.mpf(x) + mpmath.mpf(y))))
+                          for x, y in zip(a, d)])
+        given = np.array([(float(mpmath.sin(x)), float(mpmath.cos(x))) for x in a])
+    got = np.array([rotated_sincos(s, c, y) for (s, c), y in zip(given, d)])
+    assert np.abs(got - exact).max() < 3.5e-16
+    assert np.isnan(rotated_sincos(0.0, 1.0, np.nan)).all()
+    far = rotated_sincos(0.0, 1.0, 1.0)
+    assert abs(far[0] - math.sin(1.0)) > 1e-9   # beyond its range: a series cut at d⁹
 
 
 @pytest.mark.parametrize("angle, wrapped", [(math.pi, math.pi), (-math.pi, math.pi), (3 * math.pi / 2, -math.pi / 2),

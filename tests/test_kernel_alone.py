@@ -247,6 +247,28 @@ def lone_roots(integrate, config, states, dt, plan, recorded=False):
     return stats, rate
 
 
+def test_stages_beyond_the_rotation_s_range_take_the_full_sin_cos_copy_by_copy():
+    """RK4 stages 2–4 of lone roots rotate stage 1's sin θ, cos θ by δ = step·θ̇ where
+    |δ| ≤ ROTATION_MAX and compute them in full elsewhere (``kernel.rotated_heading``). With
+    dt = 0.2 s and far starts, some copies of one chunk turn faster than 1/8 rad per stage and
+    others do not: ``Kernel.roots`` must choose copy by copy as ``Kernel.alone`` does (the
+    same statistics, bit for bit; a chunk-wide choice, or none, would differ)."""
+    from nonholo.numerics import ROTATION_MAX
+
+    config = controller("dynamic-feedback", xi0=0.5)
+    kernel = kernel_for(((config.law, config.controller.gain_tuple),), False)
+    dt, copies, n_steps = 0.2, 9, 40
+    plan = np.ones(n_steps, dtype=np.int64)
+    states = np.array([[0.3 * i - 1.0, 1.5 * (i % 2), 0.9 * i, 0.5] for i in range(copies)]).T   # x, y, θ, ξ
+    batch, rate = lone_roots(kernel.integrator(False, copies), config, states, dt, plan)
+    assert (rate[:n_steps] * dt / 2).max() > 2 * ROTATION_MAX   # some stages beyond the range
+    assert (rate[n_steps // 2:n_steps] * dt).min() < ROTATION_MAX   # and steps within it
+    rows = list(range(kn.ROBOT_STATS))
+    for c in range(copies):
+        own, _ = lone_roots(kernel.integrator(False, 1), config, states[:, c:c + 1], dt, plan)
+        assert np.array_equal(own[rows, 0, 0], batch[rows, 0, c])
+
+
 @pytest.mark.parametrize("recorded", [False, True])
 def test_a_nan_copy_does_not_hide_the_rates_of_its_chunk(recorded):
     """``Kernel.roots`` takes each step's largest rate over a chunk of copies (as integers):

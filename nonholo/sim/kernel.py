@@ -70,7 +70,7 @@ from nonholo.control.formation import separation_bearing_law, separation_separat
 from nonholo.models.formation_geometry import link_geometry
 from nonholo.models.formation_kinematics import bearing_rate, separation_rate
 from nonholo.models.unicycle import unicycle_rates
-from nonholo.numerics import sincos, wrap_angle
+from nonholo.numerics import ROTATION_MAX, rotated_sincos, sincos, wrap_angle
 from nonholo.references.feedforward import REF_THETA, REF_X, REF_Y
 from nonholo.sim.lawcall import (FIELDS_SIZE, REF_SIZE, law_at_address, law_entry, row_address, stable_cache_identity,
                                  stack_copy)
@@ -141,10 +141,13 @@ SLOPE_COUNT = 4   # what ``roots`` keeps of a copy's RK4 stage for the next ones
 RATE_ROW = SLOPE_COUNT   # and, in the row after k1's, its first stage's rate (``largest_rate``)
 # ``roots`` runs a chunk of copies in one workspace (``workspace_views``): the rows of its state,
 # statistics, fields and limits (copied in and out by ``roots``), then scratch rows: the sample
-# at t_k, the stage rates k1 (with RATE_ROW), k2, k3, and a stage's sin θ and cos θ. Rows of
+# at t_k, the stage rates k1, k2, k3 (each with a RATE_ROW), and sin θ and cos θ at stage 1 and
+# at the stage being computed (``HEADING_ROWS``). Rows of
 # ROOTS_CHUNK + 8 columns (a row 17 cache lines long, not a power of two: rows 1 KiB apart
 # shared the L1 cache's sets, and the kernel ran a third slower), the first 64-byte aligned.
-WORKSPACE_COUNTS = (4, STAT_COUNT, MAX_FIELDS, 2, KEPT_COUNT, SLOPE_COUNT + 1, SLOPE_COUNT, SLOPE_COUNT, 2)
+HEADING_ROWS = 4   # sin θ, cos θ at stage 1; sin θ, cos θ at the stage (``stage_headings``)
+WORKSPACE_COUNTS = (4, STAT_COUNT, MAX_FIELDS, 2, KEPT_COUNT, SLOPE_COUNT + 1, SLOPE_COUNT + 1, SLOPE_COUNT + 1,
+                    HEADING_ROWS)
 WORKSPACE_FIRST = tuple(int(n) for n in np.cumsum((0,) + WORKSPACE_COUNTS[:-1]))
 WORKSPACE_ROWS = sum(WORKSPACE_COUNTS)
 WORKSPACE_WIDTH = ROOTS_CHUNK + 8
@@ -380,37 +383,63 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
 # (the kernels that call them are, with their code inside).
 # ``law_command`` (called by both, and by ``Kernel.roots`` with sin/cos of its own) has no
 # arithmetic of its own to fuse, only the limits' comparisons: one variant serves both.
-# ``stage_sincos`` is ``sincos`` as the lone roots' kernels compile it (fused multiply-adds:
-# the same numbers as in their ``root_command``), for ``Kernel.roots``'s time loop: inlined
-# by numba, its code was copied into that loop at each of six call sites (1.5 s more of a
-# fresh install's compiling per law).
+# ``stage_sincos`` and ``stage_rotation`` are ``sincos`` and ``rotated_sincos`` as the lone
+# roots' kernels compile them (fused multiply-adds: the same numbers as in their
+# ``root_command`` and ``root_rk4``), for ``Kernel.roots``'s time loop: inlined by numba, their
+# code was copied into that loop at each call site (1.5 s more of a fresh install's
+# compiling per law).
 law_command = njit(error_model="numpy", fastmath=False)(law_command)
 stage_sincos = njit(error_model="numpy", fastmath={"contract"})(sincos.py_func)
+stage_rotation = njit(error_model="numpy", fastmath={"contract"})(rotated_sincos.py_func)
 root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
 root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
-for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"),
+for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"), (stage_rotation, "stage_rotation"),
                          (root_command_exact, "root_command_exact"), (root_command, "root_command")):
     _function._set_uuid(f"{__name__}.{_name}")
 
 
-def _make_root_rk4(command, fastmath):
+@njit(inline="always", error_model="numpy")
+def rotated_heading(sin_a, cos_a, d, angle):
+    """sin and cos of an RK4 stage's heading ``angle`` = a + d, from the first stage's sin a
+    and cos a: rotated (``rotated_sincos``) where |d| ≤ ``ROTATION_MAX``, else in full. The
+    rule of every lone root's stages 2–4 under continuous-time control (``root_rk4_fused``,
+    ``Kernel.roots``: the same numbers). d is h/2·ω or h·ω: in range unless h·|ω| > 1/8,
+    beyond what sub-step plans allow once planned, so the full sin/cos is the rare case."""
+    if abs(d) <= ROTATION_MAX:
+        return rotated_sincos(sin_a, cos_a, d)
+    return sincos(angle)
+
+
+@njit(inline="always", error_model="numpy")
+def full_heading(sin_a, cos_a, d, angle):
+    """sin and cos of an RK4 stage's heading ``angle``, in full (graphs with followers and the
+    solver-step study: IEEE arithmetic throughout)."""
+    return sincos(angle)
+
+
+def _make_root_rk4(heading, fastmath):
     def root_rk4(law, gains, x, y, theta, xi, r0, r1, r2, h, v_max, omega_max):
         """One classical RK4 step of a root under ``law``, the four stages in registers: the
         new (x, y, θ, ξ), then each stage's (x, y, θ, ξ, ξ̇, v, ω) for children and rate
         measures; the first stage's also ends with its (singular, sat v, sat ω): it is the
-        command at the step's start, which the sample at t_k takes."""
+        command at the step's start, which the sample at t_k takes. Stages 2–4 take their
+        sin θ and cos θ from ``heading`` (``rotated_heading`` or ``full_heading``)."""
         half = 0.5 * h
-        v1, w1, e1, singular, sat_v, sat_w, c, s = command(law, gains, x, y, theta, xi, r0, v_max, omega_max)
-        a1, b1, c1 = unicycle_rates(v1, w1, c, s)
+        s1, co1 = sincos(theta)
+        v1, w1, e1, singular, sat_v, sat_w = law_command(law, gains, x, y, theta, s1, co1, xi, r0, v_max, omega_max)
+        a1, b1, c1 = unicycle_rates(v1, w1, co1, s1)
         x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
-        v2, w2, e2, _, _, _, c, s = command(law, gains, x2, y2, t2, xi2, r1, v_max, omega_max)
-        a2, b2, c2 = unicycle_rates(v2, w2, c, s)
+        s, co = heading(s1, co1, half * c1, t2)
+        v2, w2, e2, _, _, _ = law_command(law, gains, x2, y2, t2, s, co, xi2, r1, v_max, omega_max)
+        a2, b2, c2 = unicycle_rates(v2, w2, co, s)
         x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * e2
-        v3, w3, e3, _, _, _, c, s = command(law, gains, x3, y3, t3, xi3, r1, v_max, omega_max)
-        a3, b3, c3 = unicycle_rates(v3, w3, c, s)
+        s, co = heading(s1, co1, half * c2, t3)
+        v3, w3, e3, _, _, _ = law_command(law, gains, x3, y3, t3, s, co, xi3, r1, v_max, omega_max)
+        a3, b3, c3 = unicycle_rates(v3, w3, co, s)
         x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * e3
-        v4, w4, e4, _, _, _, c, s = command(law, gains, x4, y4, t4, xi4, r2, v_max, omega_max)
-        a4, b4, c4 = unicycle_rates(v4, w4, c, s)
+        s, co = heading(s1, co1, h * c3, t4)
+        v4, w4, e4, _, _, _ = law_command(law, gains, x4, y4, t4, s, co, xi4, r2, v_max, omega_max)
+        a4, b4, c4 = unicycle_rates(v4, w4, co, s)
         sixth = h / 6.0
         return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
                  rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
@@ -420,8 +449,8 @@ def _make_root_rk4(command, fastmath):
     return njit(error_model="numpy", fastmath=fastmath)(root_rk4)
 
 
-root_rk4_fused = _make_root_rk4(root_command, {"contract"})
-root_rk4_exact = _make_root_rk4(root_command_exact, False)
+root_rk4_fused = _make_root_rk4(rotated_heading, {"contract"})
+root_rk4_exact = _make_root_rk4(full_heading, False)
 root_rk4_fused._set_uuid(f"{__name__}.root_rk4_fused")
 root_rk4_exact._set_uuid(f"{__name__}.root_rk4_exact")
 
@@ -1096,35 +1125,44 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
 
     @njit(inline="always", **_OPTIONS)
-    def stage_headings(r, c0, c1, state, step, k_in, trig):
-        """sin θ and cos θ at RK4 stage 2, 3 or 4 (θ + step·k_in[θ]) of copies c0 … c1 − 1 of
-        root r, into ``trig``'s rows 0 and 1, for the stage's own loop. A loop of its own:
-        the sin/cos is half of a stage's dependent chain, and the processor overlaps fewer
-        copies of a longer chain (``docs/performance.md``: the kernel ran 4 % faster). Stage
-        1 keeps its sin/cos in its loop (with the sample's statistics there, apart it was
-        2 % slower)."""
+    def stage_headings(r, c0, c1, state, step, k_in, widest, trig):
+        """sin θ and cos θ at RK4 stage 2, 3 or 4 (θ + δ, δ = step·k_in[θ]) of copies c0 … c1 − 1
+        of root r, into ``trig``'s rows 2 and 3, by ``rotated_heading``'s rule: rotated from
+        stage 1's (rows 0 and 1), then, only when some |δ| may exceed ``ROTATION_MAX``
+        (``widest``: the largest |k_in[θ]|, a NaN counted 0: its stage is NaN either way), the
+        full sin/cos of those copies. A loop of its own: the sin/cos is half of a stage's
+        dependent chain, and the processor overlaps fewer copies of a longer chain
+        (``docs/performance.md``)."""
         for b in range(c0, c1):
             i = b - c0
-            trig[0, i], trig[1, i] = stage_sincos(state[2, r, b] + step * k_in[2, i])
+            trig[2, i], trig[3, i] = stage_rotation(trig[0, i], trig[1, i], step * k_in[2, i])
+        if not step * widest <= ROTATION_MAX:   # (every copy's full sin/cos, kept where |δ| is wide:
+            for b in range(c0, c1):              # a select, where a branch cost 1.2 s more compiling per law)
+                i = b - c0
+                sin_t, cos_t = stage_sincos(state[2, r, b] + step * k_in[2, i])
+                wide = not abs(step * k_in[2, i]) <= ROTATION_MAX
+                trig[2, i], trig[3, i] = (sin_t, cos_t) if wide else (trig[2, i], trig[3, i])
 
     @njit(inline="always", **_OPTIONS)
-    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, k_out, peak, trig):
-        """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2), at
-        t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3); the largest rate so far
-        (``peak``) when measuring. ``k_in`` and ``k_out`` are arrays of their own, arguments
-        of ``run_roots``: rows of one array chosen by a variable left LLVM unable to tell the
-        rows read from the rows written, and the loop ran 2.7x slower."""
-        stage_headings(r, c0, c1, state, half, k_in, trig)
+    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, widest, k_out, peak, trig):
+        """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2, its
+        largest |θ̇| ``widest``), at t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3).
+        Returns the largest rate so far (``peak``) when measuring, and k_out's largest |θ̇|.
+        ``k_in`` and ``k_out`` are arrays of their own, arguments of ``run_roots``: rows of one
+        array chosen by a variable left LLVM unable to tell the rows read from the rows
+        written, and the loop ran 2.7x slower."""
+        stage_headings(r, c0, c1, state, half, k_in, widest, trig)
         for b in range(c0, c1):
             i = b - c0
             x, y = state[0, r, b] + half * k_in[0, i], state[1, r, b] + half * k_in[1, i]
             theta, xi = state[2, r, b] + half * k_in[2, i], state[3, r, b] + half * k_in[3, i]
-            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[0, i],
-                                                                trig[1, i], xi, ref)
+            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[2, i],
+                                                                trig[3, i], xi, ref)
             k_out[0, i], k_out[1, i], k_out[2, i], k_out[3, i] = dx, dy, dtheta, dxi
+            k_out[RATE_ROW, i] = tracking_rate(dtheta)
             if measuring:
                 peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-        return peak
+        return peak, largest_rate(k_out, np.int64(c1 - c0))
 
     @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
     def run_roots(workspace, c1, rows, row_start, substeps, xi_speed, dt, k_start, k_stop, n_steps, record,
@@ -1171,6 +1209,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
+                        trig[0, i], trig[1, i] = sin_t, cos_t
                         err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
                         store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
                                                              sat_v, sat_w, err1, err2))
@@ -1187,6 +1226,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
                                                                                             theta, sin_t, cos_t, xi, r0)
                         k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
+                        trig[0, i], trig[1, i] = sin_t, cos_t
                         keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
                         if measuring:
                             k1[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
@@ -1195,16 +1235,19 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     if not measuring:
                         keep_step_rate(stats, r, c0, c1, k1, wide)
                     peak = largest_rate(k1, np.int64(c1 - c0))
-                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, k2, peak, trig)
-                peak = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, k3, peak, trig)
-                stage_headings(r, c0, c1, state, h, k3, trig)
+                # (k1's largest rate bounds its |θ̇| = |ω|: ``tracking_rate``, or ``stage_rate``)
+                peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, peak, k2, peak,
+                                            trig)
+                peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, widest, k3, peak,
+                                            trig)
+                stage_headings(r, c0, c1, state, h, k3, widest, trig)
                 for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
                     i = b - c0
                     x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
                     x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
                         xi0 + h * k3[3, i]
-                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[0, i],
-                                                                        trig[1, i], xi, r2)
+                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[2, i],
+                                                                        trig[3, i], xi, r2)
                     state[0, r, b] = rk4_sum(x0, sixth, k1[0, i], k2[0, i], k3[0, i], dx)
                     state[1, r, b] = rk4_sum(y0, sixth, k1[1, i], k2[1, i], k3[1, i], dy)
                     state[2, r, b] = rk4_sum(theta0, sixth, k1[2, i], k2[2, i], k3[2, i], dtheta)
