@@ -403,8 +403,9 @@ def rotated_heading(sin_a, cos_a, d, angle):
     """sin and cos of an RK4 stage's heading ``angle`` = a + d, from the first stage's sin a
     and cos a: rotated (``rotated_sincos``) where |d| ≤ ``ROTATION_MAX``, else in full. The
     rule of every lone root's stages 2–4 under continuous-time control (``root_rk4_fused``,
-    ``Kernel.roots``: the same numbers). d is h/2·ω or h·ω: in range unless h·|ω| > 1/8,
-    beyond what sub-step plans allow once planned, so the full sin/cos is the rare case."""
+    ``Kernel.roots``: the same numbers). d is h/2·ω or h·ω: in range while h·|ω| ≤ 1/8 at
+    stage 4 (1/4 at stages 2 and 3); tracking plans allow h·|ω| up to ``STABLE_STEP_FACTOR``
+    (0.5), so fast turns (far starts, coarse steps) take the full sin/cos, at its cost."""
     if abs(d) <= ROTATION_MAX:
         return rotated_sincos(sin_a, cos_a, d)
     return sincos(angle)
@@ -1137,7 +1138,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             i = b - c0
             trig[2, i], trig[3, i] = stage_rotation(trig[0, i], trig[1, i], step * k_in[2, i])
         if not step * widest <= ROTATION_MAX:   # (every copy's full sin/cos, kept where |δ| is wide:
-            for b in range(c0, c1):              # a select, where a branch cost 1.2 s more compiling per law)
+            for b in range(c0, c1):              # a select, which vectorizes)
                 i = b - c0
                 sin_t, cos_t = stage_sincos(state[2, r, b] + step * k_in[2, i])
                 wide = not abs(step * k_in[2, i]) <= ROTATION_MAX
