@@ -138,7 +138,7 @@ MEASURE_NONE, MEASURE_STAGES, MEASURE_FIRST_STAGE = 0, 1, 2
 ROOTS_CHUNK = 128
 KEPT_COUNT = 9   # what ``roots`` keeps of a copy's sample at t_k: x, y, θ, ξ, v, ω, singular, sat v, sat ω
 SLOPE_COUNT = 4   # what ``roots`` keeps of a copy's RK4 stage for the next ones: k1, k2, k3 (ẋ, ẏ, θ̇, ξ̇) each
-RATE_ROW = SLOPE_COUNT   # and, in the row after k1's, its first stage's rate (``largest_rate``)
+RATE_ROW = SLOPE_COUNT   # and in the row after: k1's stage rate (the plan's), k2's and k3's |θ̇| (``stage_headings``)
 # ``roots`` runs a chunk of copies in one workspace (``workspace_views``): the rows of its state,
 # statistics, fields and limits (copied in and out by ``roots``), then scratch rows: the sample
 # at t_k, the stage rates k1, k2, k3 (each with a RATE_ROW), and sin θ and cos θ at stage 1 and
@@ -491,19 +491,19 @@ def wide_substep(substeps, k, n_steps, dt):
 
 
 @njit(inline="always", **_OPTIONS)
-def largest_rate(k1, n):
-    """The largest of the first n rates in row ``RATE_ROW`` of ``k1`` (not negative and not
-    NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a maximum of their bit
-    patterns as integers, which order non-negative floats as their values do and which LLVM
-    vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
+def largest_rate(k, n):
+    """The largest of the first n rates in row ``RATE_ROW`` of a stage's rates ``k`` (k1, k2 or
+    k3; not negative and not NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a
+    maximum of their bit patterns as integers, which order non-negative floats as their
+    values do and which LLVM vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
     loop holding it ran 2.5x slower. The largest is written back to the row's first slot and
     read there as the float it is."""
-    bits = k1[RATE_ROW].view(np.int64)
+    bits = k[RATE_ROW].view(np.int64)
     largest = bits[0]
     for i in range(1, n):
         largest = max(largest, bits[i])
     bits[0] = largest
-    return k1[RATE_ROW, 0]
+    return k[RATE_ROW, 0]
 
 
 @njit(inline="always", **_OPTIONS)
@@ -1270,11 +1270,11 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         n_batch = state.shape[2]
         workspace = new_workspace()
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
+        kept = tuple(zip(WORKSPACE_FIRST, WORKSPACE_COUNTS, (state, stats, fields, limits)))
         for r in range(state.shape[1]):
             for start in range(0, n_batch, ROOTS_CHUNK):
                 stop = min(start + ROOTS_CHUNK, n_batch)
                 columns = (slice(None), r, slice(start, stop))
-                kept = tuple(zip(WORKSPACE_FIRST, WORKSPACE_COUNTS, (state, stats, fields, limits)))
                 for first, count, array in kept:
                     workspace[first:first + count, :stop - start] = array[columns]
                 # the copy count unsigned: no negative-index wrap-around for LLVM to keep, which
