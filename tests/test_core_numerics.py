@@ -28,8 +28,8 @@ def test_rotated_sincos_is_sin_and_cos_of_the_sum_to_a_few_ulp_within_its_range(
     d = rng.uniform(-ROTATION_MAX, ROTATION_MAX, a.size)
     d[:5] = [0.0, -0.0, ROTATION_MAX, -ROTATION_MAX, 1e-300]
     with mpmath.workdps(40):
-        exact = np.array([(float(mpmath.sin(mpmath.mpf(x) + mpmath.mpf(y))), float(mpmath.cos(mpmath.mpf(x) + mpmath.mpf(y))))
-                          for x, y in zip(a, d)])
+        sums = [mpmath.mpf(x) + mpmath.mpf(y) for x, y in zip(a, d)]   # a + d exactly
+        exact = np.array([(float(mpmath.sin(t)), float(mpmath.cos(t))) for t in sums])
         given = np.array([(float(mpmath.sin(x)), float(mpmath.cos(x))) for x in a])
     got = np.array([rotated_sincos(s, c, y) for (s, c), y in zip(given, d)])
     assert np.abs(got - exact).max() < 3.5e-16

@@ -393,8 +393,9 @@ stage_sincos = njit(error_model="numpy", fastmath={"contract"})(sincos.py_func)
 stage_rotation = njit(error_model="numpy", fastmath={"contract"})(rotated_sincos.py_func)
 root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
 root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
-for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"), (stage_rotation, "stage_rotation"),
-                         (root_command_exact, "root_command_exact"), (root_command, "root_command")):
+for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"),
+                         (stage_rotation, "stage_rotation"), (root_command_exact, "root_command_exact"),
+                         (root_command, "root_command")):
     _function._set_uuid(f"{__name__}.{_name}")
 
 
