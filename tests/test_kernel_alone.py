@@ -157,6 +157,20 @@ def test_unrecorded_batches_add_each_sample_in_the_step_s_loop_alike(name):
     assert np.array_equal(a[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]], b[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]])
 
 
+def test_every_batch_of_a_law_runs_one_compiled_time_loop():
+    # recorded or not, in one chunk or several: ``run_roots`` is compiled once per law (the
+    # record it writes is the simulator's whole array, never a slice whose layout varies:
+    # each further signature cost a fresh install 5-8 s of compiling per law)
+    config = controller("kanayama")
+    robot = Robot("r", config, (2.0, -1.5, 0.3))
+    scenario = Scenario(references.eight(), [robot], duration=0.5, dt=0.01)
+    for copies, record in ((kn.ALONE_BELOW + 3, True), (kn.ROOTS_CHUNK + 3, True), (kn.ALONE_BELOW + 3, False),
+                           (kn.ROOTS_CHUNK + 3, False)):
+        simulate([scenario] * copies, record=record)
+    loop = kernel_for(((config.law, config.controller.gain_tuple),), False).roots.time_loop
+    assert len(loop.signatures) == 1
+
+
 def test_integrate_refuses_what_it_leaves_to_roots_and_alone():
     # (dynamic feedback: the sampled-data tests compile its ``integrate`` anyway)
     robot = Robot("r", controller("dynamic-feedback"), (0.2, 0.1, 0.0))

@@ -1089,8 +1089,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         sample[5, i], sample[6, i], sample[7, i], sample[8, i] = omega, singular, sat_v, sat_w
 
     @njit(inline="always", **_OPTIONS)
-    def add_samples(sample, r, c0, c1, ref, k, posture, fields, stats, record, step_rate):
-        """Add the samples ``keep_sample`` kept at output step k to the statistics and record."""
+    def add_samples(sample, r, c0, c1, ref, k, posture, fields, stats, record, record_at, step_rate):
+        """Add the samples ``keep_sample`` kept at output step k to the statistics and record
+        (copy b of robot r at ``record``'s robot and copy ``record_at`` + (r, b))."""
         t = ref[0]
         for b in range(c0, c1):
             i = b - c0
@@ -1101,9 +1102,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             for b in range(c0, c1):
                 i = b - c0
                 err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
-                store_record(record, k, r, b, record_row(sample[0, i], sample[1, i], sample[2, i], sample[3, i],
-                                                         sample[4, i], sample[5, i], err1, err2, sample[6, i],
-                                                         sample[7, i], sample[8, i]))
+                store_record(record, k, record_at[0] + r, record_at[1] + b,
+                             record_row(sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i],
+                                        sample[5, i], err1, err2, sample[6, i], sample[7, i], sample[8, i]))
         if measuring:
             for i in range(c1 - c0):
                 step_rate[k] = max(step_rate[k], abs(sample[5, i]))
@@ -1168,10 +1169,13 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
 
     @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
     def run_roots(workspace, c1, rows, row_start, substeps, xi_speed, dt, k_start, k_stop, n_steps, record,
-                  step_rate):
+                  record_at, step_rate):
         """``roots``' time loop for the first c1 copies (unsigned) of one robot, held in
         ``workspace`` (``new_workspace``; its parts named as ``workspace_views`` names them),
-        ``record`` the robot's and copies' slice of the record. An RK4 step runs
+        ``record`` the simulator's record, where the workspace's copy b of its robot is
+        ``record``'s robot and copy ``record_at`` + (0, b): the whole array, not a slice, so that
+        every batch runs one compiled time loop (a slice of it was a C array or not, two
+        compilations of this function per law). An RK4 step runs
         stage by stage, one loop over the copies each, ``k1``, ``k2`` and ``k3`` keeping each
         copy's stage rates (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``k1`` its first
         stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
@@ -1190,7 +1194,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                     _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, sin_t,
                                                                                cos_t, xi, ref)
                     keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, step_rate)
+                add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, record_at, step_rate)
                 break
             m = substeps[k]
             h = dt / m
@@ -1258,7 +1262,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                 step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
                 if j == 0 and not inline_sample:
-                    add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, step_rate)
+                    add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
 
     def roots(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
               branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
@@ -1281,7 +1285,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 # the copy count unsigned: no negative-index wrap-around for LLVM to keep, which
                 # would stop it vectorizing the loops over the copies
                 run_roots(workspace, np.uint64(stop - start), rows, row_start, substeps, float(xi_speed), float(dt),
-                          *span, record[:, :, r:r + 1, start:stop], step_rate)
+                          *span, record, (np.int64(r), np.uint64(start)), step_rate)
                 for first, count, array in kept[:2]:   # (fields and limits are only read)
                     array[columns] = workspace[first:first + count, :stop - start]
 
