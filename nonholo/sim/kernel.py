@@ -1088,7 +1088,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i] = x, y, theta, xi, v
         sample[5, i], sample[6, i], sample[7, i], sample[8, i] = omega, singular, sat_v, sat_w
 
-    @njit(inline="always", **_OPTIONS)
+    @njit(**_OPTIONS)   # (not inlined by numba: two call sites, 0.5-1 s of compiling per law; LLVM inlines it)
     def add_samples(sample, r, c0, c1, ref, k, posture, fields, stats, record, record_at, step_rate):
         """Add the samples ``keep_sample`` kept at output step k to the statistics and record
         (copy b of robot r at ``record``'s robot and copy ``record_at`` + (r, b))."""
@@ -1297,7 +1297,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
         evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
-        + ((run_roots,) if not followers else ())}
+        + ((run_roots, add_samples) if not followers else ())}
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls
