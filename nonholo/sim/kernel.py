@@ -524,7 +524,7 @@ def add_sample(old, t, k, v, omega, singular, sat_v, sat_w, err1, err2):
      sat_w_sum, singular_sum, first_singular, sat_any_sum) = old
     e = abs(err1)
     delta = e - e_mean
-    mean = e_mean + delta / (k + 1.0)
+    mean = e_mean + delta * (1.0 / (k + 1.0))   # (the reciprocal is one per step, outside a batch's loop)
     heading = abs(err2)
     speed, turn = abs(v), abs(omega)
     return (mean, e_m2 + delta * (e - mean), e_sq + e * e, max(e_max, e), e, h_sum + heading, h_sq + heading * heading,
