@@ -6,22 +6,6 @@ import pytest
 
 SPEC = Path(__file__).resolve().parents[1].parent / "shared" / "spec"
 
-# The suite runs in two pytest-xdist workers, a file at a time (``--dist loadgroup`` with one
-# group per file, set here). These files run robots on the wall clock (fleets of processes,
-# paced runs, live servers, timed links) or a browser: they share one group, so that they run
-# one after another in one worker, never two of them at once on the machine's two cores (a
-# restarted robot once came up after its followers' run had ended, and a paced run fell
-# behind, each beside a fleet or browser test in the other worker).
-ON_THE_CLOCK = frozenset({"test_fleet_faults.py", "test_fleet_telemetry.py", "test_fleet_launcher.py",
-                          "test_view_processes.py", "test_view_browser.py", "test_view_server.py",
-                          "test_view_foxglove.py", "test_comm_transports.py", "test_comm_hub_attacks.py"})
-
-
-def pytest_collection_modifyitems(config, items):
-    for item in items:
-        name = item.path.name
-        item.add_marker(pytest.mark.xdist_group("on-the-clock" if name in ON_THE_CLOCK else name))
-
 
 @pytest.fixture(scope="session")
 def spec_dir():
