@@ -162,8 +162,8 @@ def test_follower_killed_others_continue_and_wrong_key_is_refused(fleet):
 
 def test_leader_restarted_followers_rejoin(fleet):
     # the followers must still be running when the new leader process is up: a new process
-    # imports and loads its compiled code first (~1-2 s, 3 s and more on a loaded machine,
-    # e.g. beside a browser test in the other worker), hence a run of 8 s
+    # imports and loads its compiled code first (~1-2 s, 3 s and more on a loaded machine: a
+    # 4-s run once ended first, beside another CPU-bound process), hence a run of 8 s
     robots = fleet(duration=8.0)
     os.killpg(robots.processes["leader"].pid, signal.SIGKILL)
     robots.processes["leader"].wait(5.0)

@@ -204,8 +204,8 @@ class Group:
         gain_rows, xi_starts = [], []
         for j, robot in enumerate(robots):   # one position of the graph in every copy at once
             column = [scenarios[member].robots[indices[j]] for member, indices in copies]
-            self.state[:3, j] = np.fromiter(chain.from_iterable(poses[member][indices[j]] for member, indices in copies),
-                                            float, 3 * n_batch).reshape(n_batch, 3).T
+            starts = chain.from_iterable(poses[member][indices[j]] for member, indices in copies)
+            self.state[:3, j] = np.fromiter(starts, float, 3 * n_batch).reshape(n_batch, 3).T
             self.limits[0, j] = np.fromiter((r.v_max for r in column), float, n_batch)
             self.limits[1, j] = np.fromiter((r.omega_max for r in column), float, n_batch)
             if isinstance(robot, Robot):
