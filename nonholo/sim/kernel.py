@@ -496,8 +496,8 @@ def largest_rate(k, n):
     """The largest of the first n rates in row ``RATE_ROW`` of a stage's rates ``k`` (k1, k2 or
     k3; not negative and not NaN: ``tracking_rate``, or ``stage_rate`` under max(0, ·)): a
     maximum of their bit patterns as integers, which order non-negative floats as their
-    values do and which LLVM vectorizes; a float maximum carried from copy to copy it may not reorder (NaN), and the
-    loop holding it ran 2.5x slower. The largest is written back to the row's first slot and
+    values do and which LLVM vectorizes; a float maximum carried from copy to copy it may not
+    reorder (NaN), and the loop holding it ran 2.5x slower. The largest is written back to the row's first slot and
     read there as the float it is."""
     bits = k[RATE_ROW].view(np.int64)
     largest = bits[0]
