@@ -409,3 +409,84 @@ def test_a_daemonic_worker_computes_here_instead_of_forking():
         assert queue.get(timeout=30) == (False, True)
     finally:
         worker.join(30)
+
+
+# ------------------------------------------------------------------ compiling ahead
+
+def _study(name, order, tmp_path, warm_up=None, wait=False):
+    from nonholo.studies.base import Study, StudyResult
+
+    class Done(StudyResult):
+        title, elapsed_s = name, 0.0
+        text = html_section = write_data = to_dict = lambda self, *args, **kwargs: None
+
+    def run(options):
+        if wait:   # the child runs the later warm-ups meanwhile: wait for them
+            deadline = time.monotonic() + 30
+            while not (tmp_path / "second").exists() and time.monotonic() < deadline:
+                time.sleep(0.01)
+        result = Done()
+        result.name = name
+        return result
+
+    return Study(name=name, title=name, summary=name, run=run, order=order, warm_up=warm_up)
+
+
+def _warm_up_writing(path, fail=False):
+    def warm_up(options):
+        path.write_text(f"{os.getpid()} {os.nice(0)} {options.quick}")
+        if fail:
+            raise RuntimeError("a warm-up that fails")
+    return warm_up
+
+
+@needs_fork
+@pytest.mark.parametrize("processes", [0, 2])
+def test_later_studies_warm_up_in_a_lower_priority_child_while_the_first_runs(tmp_path, monkeypatch, processes):
+    from nonholo.studies import report
+    from nonholo.studies.base import StudyOptions
+
+    studies = [_study("first", 1, tmp_path, _warm_up_writing(tmp_path / "never"), wait=processes > 0),  # no need
+               _study("second", 2, tmp_path, warm_up=_warm_up_writing(tmp_path / "second", fail=True)),
+               _study("third", 3, tmp_path),
+               _study("fourth", 4, tmp_path, warm_up=_warm_up_writing(tmp_path / "fourth"))]
+    monkeypatch.setattr(report, "chosen_studies", lambda names: studies)
+    options = StudyOptions(tmp_path / "out", quick=True, progress=False, processes=processes)
+    names = [result.name for result in report.each_result(None, options)]
+    assert names == ["first", "second", "third", "fourth"]
+    assert not (tmp_path / "never").exists() and _reaped("nonholo-compile-ahead")
+    if processes == 0:   # nothing beside the studies: no warm-up at all
+        assert not (tmp_path / "second").exists() and not (tmp_path / "fourth").exists()
+        return
+    for name in ("second", "fourth"):   # the failing one did not stop the next
+        pid, nice, quick = (tmp_path / name).read_text().split()
+        assert int(pid) != os.getpid() and quick == "True"
+        assert int(nice) == min(19, os.nice(0) + report.AHEAD_NICE)
+
+
+WARMED = """
+import gc, sys
+import numba
+from nonholo.studies.base import StudyOptions
+from nonholo.studies.{module} import STUDY
+
+def overloads():
+    return sum(len(d.overloads) for d in gc.get_objects() if isinstance(d, numba.core.registry.CPUDispatcher))
+
+options = StudyOptions(sys.argv[1], quick=True, progress=False)
+STUDY.warm_up(options)
+warmed = overloads()
+STUDY.run(options)
+print(warmed, overloads())
+"""
+
+
+@pytest.mark.parametrize("module", ["formation", "posture"])
+def test_a_study_s_warm_up_compiles_every_kernel_its_run_uses(tmp_path, module):
+    # in a fresh process: its run adds no compiled function to those of its warm-up (each
+    # one loaded from the disk cache, or compiled, by the warm-up)
+    done = subprocess.run([sys.executable, "-c", WARMED.format(module=module), str(tmp_path)], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    warmed, after = map(int, done.stdout.split()[-2:])
+    assert warmed > 0 and after == warmed

@@ -10,13 +10,19 @@ present itself: ``text()`` for the terminal (at most 100 columns: summaries; the
 tables go to the report and CSV), ``html_section(folder, draw)`` for the report
 (it hands each figure's drawing to ``draw``, which writes it into ``folder``, and returns an
 HTML fragment that refers to the figures by relative path), ``write_data(folder)`` for CSV/JSON, ``to_dict()`` and ``ok``.
+
+A study may also say how to compile ahead what its run will compile (``Study.warm_up``,
+often ``run_briefly`` over its cases): ``nonholo study`` runs the later studies' warm-ups in a
+forked child while the first study runs (``studies.report.each_result``), so that a first
+run's compiling overlaps, and a later study loads its kernels from the disk cache.
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import pkgutil
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -99,13 +105,37 @@ class StudyResult(ABC):
 @dataclass(frozen=True)
 class Study:
     """A registered study: ``name`` (the CLI's argument), ``title``, one-line ``summary``,
-    ``run(options) -> StudyResult`` and its place in the report (``order``, then name)."""
+    ``run(options) -> StudyResult``, its place in the report (``order``, then name), and
+    optionally ``warm_up(options)``: compiles what ``run`` will compile, in little time once
+    compiled, and returns nothing (see the module docstring)."""
 
     name: str
     title: str
     summary: str
     run: Callable[[StudyOptions], StudyResult]
     order: int = 100
+    warm_up: Callable[[StudyOptions], None] | None = None
+
+
+#: how long ``run_briefly`` runs each case (seconds of simulated time)
+BRIEFLY_S = 1.0
+
+
+def run_briefly(cases: Iterable, seconds: float = BRIEFLY_S) -> None:
+    """Simulate the first ``seconds`` of each case (a ``Scenario`` or ``Formation`` with a
+    ``duration``), without progress, and drop the results: the compiled kernels of its full
+    run end up in the disk cache (a ``Study.warm_up``). A case that is not valid so short
+    (a change scheduled later) is left out, as one without a duration."""
+    from nonholo.errors import NonholoInputError
+    from nonholo.sim.simulator import simulate
+
+    for case in cases:
+        if case.duration is None:
+            continue
+        try:
+            simulate(dataclasses.replace(case, duration=min(case.duration, seconds)), progress=False)
+        except NonholoInputError:
+            continue
 
 
 def discover() -> dict[str, Study]:

@@ -15,7 +15,9 @@ process sees the study's data as it is in memory: nothing is copied or pickled o
   process.
 * **A call.** ``ForkedCall(function)`` runs ``function()`` in a child at once;
   ``result()`` waits for its return value (pickled back: keep it small) or raises the
-  child's exception in the parent.
+  child's exception in the parent. ``nice`` lowers the child's priority: work that only
+  speeds up later work (compiling ahead, ``studies.report.each_result``) then takes what the
+  study's own processes leave of the cores.
 
 Both fall back to this process (in order, at the same points) where ``fork`` is not the safe
 default (anything but Linux) or with ``processes=0`` (``StudyOptions``' default: a library
@@ -38,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import multiprocessing.connection
+import os
 import sys
 import threading
 import time
@@ -314,11 +317,13 @@ class Drawing:
         self.close()
 
 
-def _call(function: Callable, connection, tied: bool) -> None:
+def _call(function: Callable, connection, tied: bool, nice: int = 0) -> None:
     """A child's work for ``ForkedCall``: the return value, or the exception (itself if it
     pickles, else a ``RuntimeError`` of one line)."""
     _as_child(tied)
     try:
+        if nice:
+            os.nice(nice)
         try:
             message = ("value", function())
         except BaseException as exc:  # noqa: BLE001 (handed to the parent, whatever it was)
@@ -333,13 +338,13 @@ class ForkedCall:
     the module docstring). With ``processes=0`` or without ``fork``, ``result()`` calls it
     here instead, when asked."""
 
-    def __init__(self, function: Callable, processes: int = PROCESSES, name: str = "call"):
+    def __init__(self, function: Callable, processes: int = PROCESSES, name: str = "call", nice: int = 0):
         self.function, self.process, self.connection = function, None, None
         self._outcome: tuple | None = None   # ("value", v) or ("error", exception) once known
         if processes > 0 and forking():
             context = multiprocessing.get_context("fork")
             self.connection, sender = context.Pipe(duplex=False)
-            self.process = context.Process(target=_call, args=(function, sender, _from_main_thread()),
+            self.process = context.Process(target=_call, args=(function, sender, _from_main_thread(), nice),
                                            daemon=True, name=f"nonholo-{name}")
             try:
                 with _signals_held():

@@ -31,7 +31,7 @@ from nonholo import examples, load_scenario
 from nonholo.formation import (Follower, Formation, FormationResult, link_state, separation_bearing,
                                simulate_formation)
 from nonholo.sim.targets import target_segments
-from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.base import Study, StudyOptions, run_briefly
 from nonholo.studies.forking import draw_now
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
                                        TabulatedStudyResult, Table, degrees, show)
@@ -569,6 +569,7 @@ STUDY = Study(
     name="formation", title=FormationStudyResult.title,
     summary="l-phi and l-l followers on Tests 1 and 4, the Eq 5.9 change, Eq 5.10 bearings; thesis §5.5-5.6",
     run=run_formation,
+    warm_up=lambda options: run_briefly(all_cases(options.quick).values()),
     order=2,
 )
 

@@ -26,7 +26,7 @@ from nonholo import examples, load_scenario
 from nonholo.control.posture import POSTURE_CONTROLLERS, goal_frame_pose, polar_command
 from nonholo.formation import Formation, FormationResult, simulate_formation
 from nonholo.models.formation_geometry import wrap
-from nonholo.studies.base import Study, StudyOptions
+from nonholo.studies.base import Study, StudyOptions, run_briefly
 from nonholo.studies.forking import draw_now
 from nonholo.studies.formation import QUICK_DT
 from nonholo.studies.framework import (COMPARISON_COLUMNS, Agreement, Column, Comparison, Finding, SpecValue,
@@ -493,5 +493,6 @@ STUDY = Study(
     name="posture", title=PostureStudyResult.title,
     summary="time-varying, polar and dynamic-FL posture laws from (-10,-10) to (0,0) and (-10,10); thesis §5.7-5.8",
     run=run_posture,
+    warm_up=lambda options: run_briefly(all_cases(options.quick).values()),
     order=3,
 )

@@ -8,6 +8,7 @@ text are kept on one line (CSS ``white-space: nowrap``).
 """
 from __future__ import annotations
 
+import functools
 import html
 import json
 import re
@@ -16,6 +17,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from nonholo.studies.base import StudyOptions, StudyResult, discover
+from nonholo.studies.forking import ForkedCall
 from nonholo.studies.progress import Progress
 
 _STYLE = """
@@ -266,11 +268,32 @@ def chosen_studies(names: Sequence[str] | None) -> list:
     return sorted((studies[name] for name in chosen), key=lambda s: (s.order, s.name))
 
 
+#: the compiling-ahead child's niceness: it takes what the studies' own processes leave
+AHEAD_NICE = 10
+
+
 def each_result(names: Sequence[str] | None, options: StudyOptions) -> Iterator[StudyResult]:
     """Run the named studies in report order, yielding each result as soon as its study
-    finishes (and keeping none)."""
-    for study in chosen_studies(names):
-        yield study.run(options)
+    finishes (and keeping none). With ``options.processes``, a child forked at the start
+    runs the later studies' ``warm_up``s at a lower priority (``AHEAD_NICE``): on a first run
+    their kernels compile while the first study runs, into the disk cache that the later
+    studies then load from (if a study gets there first, it compiles for itself, as without
+    the child). The child's failures are its own; it is stopped when the studies end."""
+    studies = chosen_studies(names)
+    ahead = [study.warm_up for study in studies[1:] if study.warm_up is not None]
+    with ForkedCall(functools.partial(_warm_up, ahead, options), options.processes if ahead else 0,
+                    "compile-ahead", nice=AHEAD_NICE):
+        for study in studies:
+            yield study.run(options)
+
+
+def _warm_up(calls: Sequence[Callable[[StudyOptions], None]], options: StudyOptions) -> None:
+    """Every ``calls(options)`` in order, one's failure not stopping the next."""
+    for call in calls:
+        try:
+            call(options)
+        except Exception:  # noqa: BLE001 (the study itself will meet it, and report it)
+            continue
 
 
 def run_studies(names: Sequence[str] | None, options: StudyOptions,
