@@ -32,6 +32,14 @@ def until(condition, seconds=10.0):
         time.sleep(0.005)
 
 
+def started(folder, alone, log, name, inside=False):
+    """A ``Holder`` started (and, if ``inside``, once it holds the lock)."""
+    holder = Holder(folder, alone, log, name)
+    holder.start()
+    assert not inside or holder.inside.wait(10)
+    return holder
+
+
 class Holder(threading.Thread):
     """A worker's test: holds its own ``MachineLock`` (its own open files) until released."""
 
@@ -51,9 +59,7 @@ class Holder(threading.Thread):
 
 def test_tests_off_the_clock_run_side_by_side(tmp_path):
     log = []
-    first, second = Holder(tmp_path, False, log, "a"), Holder(tmp_path, False, log, "b")
-    first.start()
-    second.start()
+    first, second = started(tmp_path, False, log, "a"), started(tmp_path, False, log, "b")
     assert first.inside.wait(10) and second.inside.wait(10)   # both inside at once
     first.release.set()
     second.release.set()
@@ -64,14 +70,10 @@ def test_tests_off_the_clock_run_side_by_side(tmp_path):
 
 def test_a_test_on_the_clock_waits_for_the_running_test_then_runs_alone_and_goes_first(tmp_path):
     log = []
-    running = Holder(tmp_path, False, log, "running")
-    running.start()
-    assert running.inside.wait(10)
-    clock = Holder(tmp_path, True, log, "clock")
-    clock.start()
+    running = started(tmp_path, False, log, "running", inside=True)
+    clock = started(tmp_path, True, log, "clock")
     until(lambda: held(tmp_path / "gate"))            # it asked: holds the gate, waits for the tests
-    later = Holder(tmp_path, False, log, "later")
-    later.start()
+    later = started(tmp_path, False, log, "later")
     time.sleep(0.2)
     assert log == ["running in"]                      # neither the clock test nor the later one
     running.release.set()
@@ -89,11 +91,8 @@ def test_a_test_on_the_clock_waits_for_the_running_test_then_runs_alone_and_goes
 
 def test_two_tests_on_the_clock_run_one_after_the_other(tmp_path):
     log = []
-    first = Holder(tmp_path, True, log, "first")
-    first.start()
-    assert first.inside.wait(10)
-    second = Holder(tmp_path, True, log, "second")
-    second.start()
+    first = started(tmp_path, True, log, "first", inside=True)
+    second = started(tmp_path, True, log, "second")
     time.sleep(0.2)
     assert log == ["first in"]
     first.release.set()
