@@ -27,6 +27,12 @@ source share their files, and different sources never read or write each other's
 checkouts side by side each keep theirs). Files of other sources not modified for two weeks
 are removed (``prune_once``), so edits and upgrades do not pile up.
 
+**Locks.** numba saves a new overload by reading the function's index, taking the first free
+data file number, writing the index, then the data; two processes saving overloads of one
+function at once (two test workers, a study's helpers) could pair one's key with the other's
+code. nonholo's cache files are saved under an exclusive ``flock`` on ``<index>.lock`` and
+loaded under a shared one (``index_lock``, ``_locked_cache_files``).
+
 How: numba asks a list of *cache locators*, in order, where a function's cache lives; the
 first that accepts the function wins. ``install()`` (run by ``import nonholo``, before any
 nonholo module compiles anything) puts ``PackageCacheLocator`` first, before numba's
@@ -46,6 +52,7 @@ True
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -199,14 +206,70 @@ def _make_locator():
     return PackageCacheLocator
 
 
+@contextlib.contextmanager
+def index_lock(index_path: str, shared: bool):
+    """An ``flock`` on ``<index>.lock`` beside a cache index, while a process reads (shared)
+    or writes (exclusive) that function's cache: see ``_locked_cache_files``. Without
+    ``fcntl`` (Windows) or a writable folder, no lock."""
+    try:
+        import fcntl
+
+        handle = open(index_path + ".lock", "a+b")
+    except (ImportError, OSError):
+        yield
+        return
+    with handle:   # (closing it releases the lock)
+        fcntl.flock(handle, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+        yield
+
+
+def _locked_cache_files(caching, locator) -> None:
+    """numba saves a new compiled overload by loading the function's index, taking the first
+    free data file number, writing the index, then the data; every overload of a function
+    (every law's batch kernel, every law's C entry) shares one index. Two processes saving
+    two overloads at once (the test suite's two workers, a study's helpers) can take the same
+    number, and the index can end up pairing one's key with the other's code: another law's
+    kernel, run silently, from then on. So nonholo's cache files (those under
+    ``locator.root``) are saved holding an exclusive lock on their index and loaded holding a
+    shared one (``index_lock``); other functions' caches are left as numba makes them."""
+    base = caching.IndexDataCacheFile
+    if getattr(base, "nonholo_locked", False):
+        return
+
+    class LockedIndexDataCacheFile(base):
+        nonholo_locked = True
+
+        def _ours(self) -> bool:
+            root = locator.root
+            return root is not None and Path(self._index_path).parent.parent == root
+
+        def save(self, key, data):
+            if not self._ours():
+                return super().save(key, data)
+            with index_lock(self._index_path, shared=False):
+                return super().save(key, data)
+
+        def load(self, key):
+            if not self._ours():
+                return super().load(key)
+            with index_lock(self._index_path, shared=True):
+                return super().load(key)
+
+    caching.IndexDataCacheFile = LockedIndexDataCacheFile
+
+
 def install() -> None:
-    """Make numba cache nonholo's compiled code under ``cache_dir()`` (idempotent)."""
+    """Make numba cache nonholo's compiled code under ``cache_dir()``, its cache files saved
+    and loaded under a lock (idempotent)."""
     try:
         from numba.core import caching
         impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # renamed in numba 0.61
         locators = impl._locator_classes
+        caching.IndexDataCacheFile.save, caching.IndexDataCacheFile.load   # noqa: B018 (present?)
     except (ImportError, AttributeError):  # a numba without this mechanism: keep its defaults
         return
     if any(getattr(c, "__name__", "") == "PackageCacheLocator" for c in locators):
         return
-    locators.insert(0, _make_locator())
+    locator = _make_locator()
+    locators.insert(0, locator)
+    _locked_cache_files(caching, locator)

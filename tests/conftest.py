@@ -1,5 +1,6 @@
 import contextlib
 import math
+import os
 import shutil
 import sys
 import tempfile
@@ -42,9 +43,11 @@ class MachineLock:
         fcntl.flock(self.gate, fcntl.LOCK_EX)
         try:
             fcntl.flock(self.tests, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
-        finally:
-            if not alone:
-                fcntl.flock(self.gate, fcntl.LOCK_UN)
+        except BaseException:   # (interrupted while waiting: the gate is not kept)
+            fcntl.flock(self.gate, fcntl.LOCK_UN)
+            raise
+        if not alone:
+            fcntl.flock(self.gate, fcntl.LOCK_UN)
         try:
             yield
         finally:
@@ -66,7 +69,10 @@ def pytest_configure(config):
                                        "runs alone on the machine when the suite runs in workers")
     worker = getattr(config, "workerinput", None)
     if worker is not None and worker.get(LOCK_DIR):
-        config.stash[_LOCK] = MachineLock(Path(worker[LOCK_DIR]))
+        lock = config.stash[_LOCK] = MachineLock(Path(worker[LOCK_DIR]))
+        # a child a test forks (multiprocessing) shares the lock's open files: closed there,
+        # so that a child outliving a crashed worker cannot keep the lock held
+        os.register_at_fork(after_in_child=lock.close)
     elif worker is None and getattr(config.option, "numprocesses", None) and sys.platform != "win32":
         config.stash[_FOLDER] = Path(tempfile.mkdtemp(prefix="nonholo-tests-"))   # (no flock there)
 

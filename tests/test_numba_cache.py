@@ -8,6 +8,8 @@ import textwrap
 import time
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -203,3 +205,48 @@ def test_compiled_files_of_other_sources_go_after_two_weeks(tmp_path):
         os.utime(files[name], (old, old))
     assert prune_once.__wrapped__(tmp_path) == 2
     assert sorted(p.name for p in folder.iterdir()) == sorted(list(files)[2:])
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="flock is POSIX")
+def test_nonholo_s_cache_files_are_saved_under_an_exclusive_lock_and_loaded_under_a_shared_one(tmp_path, monkeypatch):
+    # numba's save is load-index, take a free data number, write index, write data: two
+    # processes saving two overloads of one function at once could pair one's key with the
+    # other's code. nonholo's index files are locked around both (numba_cache.index_lock).
+    import fcntl
+    import threading
+
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    locator = next(c for c in impl._locator_classes if c.__name__ == "PackageCacheLocator")
+    monkeypatch.setattr(locator, "root", tmp_path / "root")
+    ours, theirs = tmp_path / "root" / "sim_x", tmp_path / "elsewhere"
+    ours.mkdir(parents=True)
+    theirs.mkdir()
+
+    def blocked(call, *args):
+        """Whether ``call(*args)`` is still waiting after 0.3 s, and its thread."""
+        worker = threading.Thread(target=call, args=args, daemon=True)
+        worker.start()
+        worker.join(0.3)
+        return worker.is_alive(), worker
+
+    files, other = (caching.IndexDataCacheFile(str(folder), "probe", "stamp") for folder in (ours, theirs))
+    with open(ours / "probe.nbi.lock", "a+b") as held, open(theirs / "probe.nbi.lock", "a+b") as held_there:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        fcntl.flock(held_there, fcntl.LOCK_EX)
+        waiting, saver = blocked(files.save, "key", "compiled code")
+        assert waiting and not (ours / "probe.nbi").exists()      # it waits for the lock
+        assert not blocked(other.save, "key", "theirs")[0]
+        assert other.load("key") == "theirs"                       # not ours: never locked
+        fcntl.flock(held, fcntl.LOCK_UN)
+        saver.join(10)
+        assert not saver.is_alive() and files.load("key") == "compiled code"
+        fcntl.flock(held, fcntl.LOCK_SH)                           # readers share it
+        assert files.load("key") == "compiled code"
+        fcntl.flock(held, fcntl.LOCK_EX)                           # a writer holds it: loads wait
+        waiting, loader = blocked(files.load, "key")
+        assert waiting
+        fcntl.flock(held, fcntl.LOCK_UN)
+        loader.join(10)
+        assert not loader.is_alive()

@@ -327,7 +327,7 @@ def test_no_helper_outlives_a_stopped_study(tmp_path, signum, code):
     command = [sys.executable, "-m", "nonholo", "study", "--quick", "--quiet", "--out", str(out)]
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 120   # stopped once a helper runs (the leader's sweeps)
+        deadline = time.monotonic() + 120   # stopped once helpers run (compiling ahead, the leader's sweeps)
         while len(_children_of_command(str(out))) < 2 and time.monotonic() < deadline and process.poll() is None:
             time.sleep(0.05)
         assert len(_children_of_command(str(out))) >= 2, "no helper process was seen"
@@ -421,15 +421,22 @@ def _study(name, order, tmp_path, warm_up=None, wait=False):
         text = html_section = write_data = to_dict = lambda self, *args, **kwargs: None
 
     def run(options):
-        if wait:   # the child runs the later warm-ups meanwhile: wait for them
-            deadline = time.monotonic() + 30
-            while not (tmp_path / "second").exists() and time.monotonic() < deadline:
+        if wait:   # the child runs the later warm-ups meanwhile, in order: wait for the last one
+            deadline = time.monotonic() + 60
+            while len(_read(tmp_path / "fourth").split()) < 3 and time.monotonic() < deadline:
                 time.sleep(0.01)
         result = Done()
         result.name = name
         return result
 
     return Study(name=name, title=name, summary=name, run=run, order=order, warm_up=warm_up)
+
+
+def _read(path) -> str:
+    try:
+        return path.read_text()
+    except FileNotFoundError:
+        return ""
 
 
 def _warm_up_writing(path, fail=False):

@@ -28,7 +28,8 @@ def register(subparsers) -> None:
                         help="statistics over the uniform grid, the solver's accepted steps, or both (default)")
     parser.add_argument("--processes", type=processes_count, default=2, metavar="N",
                         help="work beside the study in up to N processes forked from this one: the report's "
-                             "figures drawn while the next study runs, the leader's gain sweeps while its tests run "
+                             "figures drawn while the next study runs, the leader's gain sweeps while its tests run; "
+                             "with N > 0, one more compiles the later studies ahead at low priority "
                              "(default: %(default)s; 0: everything in this process, in order)")
     parser.set_defaults(handler=handle)
 

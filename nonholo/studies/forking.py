@@ -323,7 +323,8 @@ def _call(function: Callable, connection, tied: bool, nice: int = 0) -> None:
     _as_child(tied)
     try:
         if nice:
-            os.nice(nice)
+            with contextlib.suppress(OSError):   # (raising one's niceness needs no privilege)
+                os.nice(nice)
         try:
             message = ("value", function())
         except BaseException as exc:  # noqa: BLE001 (handed to the parent, whatever it was)
