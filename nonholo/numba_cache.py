@@ -207,15 +207,18 @@ def _make_locator():
 
 
 @contextlib.contextmanager
-def index_lock(index_path: str, shared: bool):
-    """An ``flock`` on ``<index>.lock`` beside a cache index, while a process reads (shared)
-    or writes (exclusive) that function's cache: see ``_locked_cache_files``. Without
-    ``fcntl`` (Windows) or a writable folder, no lock."""
+def index_lock(lock_path: str | None, shared: bool):
+    """An ``flock`` on ``lock_path`` (``<index>.lock`` beside a cache index) while a process
+    reads (shared) or writes (exclusive) that function's cache: see ``_locked_cache_files``.
+    No lock for ``None`` (not nonholo's cache), without ``fcntl`` (Windows) or a writable
+    folder."""
     try:
         import fcntl
 
-        handle = open(index_path + ".lock", "a+b")
+        handle = open(lock_path, "a+b") if lock_path is not None else None
     except (ImportError, OSError):
+        handle = None
+    if handle is None:
         yield
         return
     with handle:   # (closing it releases the lock)
@@ -232,27 +235,24 @@ def _locked_cache_files(caching, locator) -> None:
     kernel, run silently, from then on. So nonholo's cache files (those under
     ``locator.root``) are saved holding an exclusive lock on their index and loaded holding a
     shared one (``index_lock``); other functions' caches are left as numba makes them."""
-    base = caching.IndexDataCacheFile
-    if getattr(base, "nonholo_locked", False):
+    base = getattr(caching, "IndexDataCacheFile", None)
+    if base is None or getattr(base, "nonholo_locked", False):   # (a numba without it: as it is)
         return
 
     class LockedIndexDataCacheFile(base):
         nonholo_locked = True
 
-        def _ours(self) -> bool:
-            root = locator.root
-            return root is not None and Path(self._index_path).parent.parent == root
+        def __init__(self, cache_path, *args, **kwargs):
+            super().__init__(cache_path, *args, **kwargs)
+            ours = locator.root is not None and Path(cache_path).parent == locator.root
+            self._lock_path = self._index_path + ".lock" if ours else None
 
         def save(self, key, data):
-            if not self._ours():
-                return super().save(key, data)
-            with index_lock(self._index_path, shared=False):
+            with index_lock(self._lock_path, shared=False):
                 return super().save(key, data)
 
         def load(self, key):
-            if not self._ours():
-                return super().load(key)
-            with index_lock(self._index_path, shared=True):
+            with index_lock(self._lock_path, shared=True):
                 return super().load(key)
 
     caching.IndexDataCacheFile = LockedIndexDataCacheFile
@@ -265,7 +265,6 @@ def install() -> None:
         from numba.core import caching
         impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # renamed in numba 0.61
         locators = impl._locator_classes
-        caching.IndexDataCacheFile.save, caching.IndexDataCacheFile.load   # noqa: B018 (present?)
     except (ImportError, AttributeError):  # a numba without this mechanism: keep its defaults
         return
     if any(getattr(c, "__name__", "") == "PackageCacheLocator" for c in locators):
