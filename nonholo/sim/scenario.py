@@ -18,6 +18,7 @@ import math
 import numbers
 from collections import Counter
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from nonholo.control.registry import CONTROLLERS, POSTURE_CONTROLLERS, ControllerConfig, controller, follower_gains
 from nonholo.errors import FormationError, NonholoInputError
@@ -348,13 +349,16 @@ class Scenario:
     def names(self) -> tuple[str, ...]:
         return tuple(r.name for r in self.robots)
 
-    @property
+    @cached_property   # (kept in the instance's __dict__: a scenario and its robots do not change)
     def roots(self) -> tuple[Robot, ...]:
         return tuple(r for r in self.robots if isinstance(r, Robot))
 
-    leaders = roots  # the thesis's word for the roots
-
     @property
+    def leaders(self) -> tuple[Robot, ...]:
+        """The thesis's word for the roots."""
+        return self.roots
+
+    @cached_property
     def followers(self) -> tuple[Follower, ...]:
         return tuple(r for r in self.robots if isinstance(r, Follower))
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections import defaultdict, namedtuple
+from collections import namedtuple
 from collections.abc import Sequence
 from functools import cache
 from itertools import chain
@@ -162,17 +162,16 @@ def measured_plan(step_rate: np.ndarray, prior: np.ndarray, dt: float, k0: int =
 
 
 class Group:
-    """The kernel's arrays for the copies of one formation structure: ``copies`` is a list of
-    (member, robot indices parents-first) pairs, one per copy."""
+    """The kernel's arrays for the copies of one formation structure: copy b is robots
+    ``index[b]`` (parents-first) of member ``members[b]``."""
 
-    def __init__(self, scenarios: list[Scenario], copies: list[tuple[int, tuple[int, ...]]], laws: tuple,
+    def __init__(self, scenarios: list[Scenario], members: np.ndarray, index: np.ndarray, laws: tuple,
                  prior: np.ndarray, v_d0: float, poses: list):
-        self.scenarios, self.copies, self.prior = scenarios, copies, prior
-        first_member, first = copies[0]
-        scenario = scenarios[first_member]
-        robots = [scenario.robots[i] for i in first]
+        self.scenarios, self.members, self.index, self.prior = scenarios, members, index, prior
+        scenario = scenarios[members[0]]
+        robots = [scenario.robots[i] for i in index[0]]
         local = {robot.name: j for j, robot in enumerate(robots)}
-        n_robots, n_batch = len(robots), len(copies)
+        n_robots, n_batch = len(robots), len(members)
         self.followers = any(isinstance(r, Follower) for r in robots)
         # Plans from measured rates where they are not known in advance (see the docstring):
         # formations' and posture laws' to MEASURED_STEP_FACTOR, tracking laws' (under
@@ -197,26 +196,31 @@ class Group:
         self.offsets = np.zeros((2, n_robots, n_batch))
         self.d_max = np.zeros(n_batch)
         self.xi_speed = 0.0
-        # Columns are read with ``np.fromiter`` and configuration tables indexed per copy: a
-        # batch of 10^4 lone roots is set up in a few ms (numpy arrays built from lists of
-        # tuples took most of it).
-        vectors: dict[int, int] = {}   # configs are usually shared by many robots: their row
-        gain_rows, xi_starts = [], []
+        # A batch of 10^4 lone roots is set up in a few ms: each robot's attributes are read in
+        # one pass each (``np.fromiter``), and its configuration by the object's identity, once
+        # per distinct object (a batch shares a few), then indexed per copy.
+        member_list = members.tolist()
+        as_given = n_robots == 1 and n_batch == len(scenario.robots) and (members == members[0]).all() and \
+            (index[:, 0] == np.arange(n_batch)).all()   # (a scenario of lone roots: its robots as they are)
         for j, robot in enumerate(robots):   # one position of the graph in every copy at once
-            column = [scenarios[member].robots[indices[j]] for member, indices in copies]
-            starts = chain.from_iterable(poses[member][indices[j]] for member, indices in copies)
+            at = index[:, j].tolist()
+            if as_given:
+                column, starts = scenario.robots, chain.from_iterable(poses[member_list[0]])
+            else:
+                column = [scenarios[m].robots[i] for m, i in zip(member_list, at)]
+                starts = chain.from_iterable(poses[m][i] for m, i in zip(member_list, at))
             self.state[:3, j] = np.fromiter(starts, float, 3 * n_batch).reshape(n_batch, 3).T
             self.limits[0, j] = np.fromiter((r.v_max for r in column), float, n_batch)
             self.limits[1, j] = np.fromiter((r.omega_max for r in column), float, n_batch)
             if isinstance(robot, Robot):
-                for r in column:
-                    config = r.controller
-                    if id(config) not in vectors:
-                        vectors[id(config)] = len(gain_rows)
-                        gain_rows.append(config.gain_vector())
-                        xi_starts.append(initial_state(config, v_d0, r.name))
-                        self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
-                rows = np.fromiter((vectors[id(r.controller)] for r in column), np.intp, n_batch)
+                configs = [r.controller for r in column]
+                first, rows = first_seen(np.fromiter(map(id, configs), np.int64, n_batch))
+                gain_rows, xi_starts = [], []
+                for b in first.tolist():
+                    config = configs[b]
+                    gain_rows.append(config.gain_vector())
+                    xi_starts.append(initial_state(config, v_d0, column[b].name))
+                    self.xi_speed = 1.0 if config.controller.xi_is_speed or self.xi_speed else 0.0
                 block = np.array(gain_rows, dtype=float)[rows]
                 if robot.posture:   # a posture law's goal comes first
                     block = np.hstack([np.array([r.goal for r in column], dtype=float), block])
@@ -227,6 +231,11 @@ class Group:
                 self.offsets[:, j] = np.array([r.targets for r in column]).T - np.array(robot.targets)[:, None]
                 self.d_max = np.maximum(self.d_max, self.fields[kn.OFFSET_D, j])
         self.robots = robots
+
+    @property
+    def copies(self) -> list[tuple[int, tuple[int, ...]]]:
+        """(member, robot indices parents-first) of each copy."""
+        return list(zip(self.members.tolist(), map(tuple, self.index.tolist())))
 
     def targets(self, times: np.ndarray) -> np.ndarray:
         """Follower targets at ``times`` (one row if none of them changes)."""
@@ -295,7 +304,8 @@ def _reference_survey(scenario: Scenario):
     """Peak |v_d|, |ω_d| of the reference, and its rows checked finite (None without one)."""
     if scenario.reference is None:
         return 0.0, 0.0
-    configs = {id(r.controller): r.controller for r in scenario.roots if not r.posture}.values()
+    configs = {id(r.controller): r.controller for r in scenario.roots}.values()   # (a batch shares a few)
+    configs = [config for config in configs if config.controller.kind != "posture"]
     for config in configs:   # (refused before any table is computed)
         follows = config.direction_of()
         if follows and follows != scenario.reference.direction:
@@ -343,10 +353,36 @@ def _prior_rate(robots, v_peak: float, omega_peak: float, known: dict) -> float:
     return rate
 
 
+SMALL_SET = 32   # ``first_seen`` numbers fewer values than this in Python
+
+
+def first_seen(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of ``values`` in order of first appearance: the index of each one's
+    first appearance, and the number of each element's value in that order."""
+    if values.size < SMALL_SET:   # (numpy's calls would cost more than the loop)
+        numbered: dict = {}
+        first, at = [], []
+        for i, value in enumerate(values.tolist()):
+            if value not in numbered:
+                numbered[value] = len(first)
+                first.append(i)
+            at.append(numbered[value])
+        return np.array(first, dtype=np.intp), np.array(at, dtype=np.intp)
+    _, first, inverse = np.unique(values, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return first[order], rank[inverse.ravel()]
+
+
 def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: float) -> list[Group]:
+    """The batch's copies (each component of each member) grouped by what must be integrated
+    together: root laws, structure and the sub-step plan of their own rates known in advance.
+    Groups and their copies come in the order of a member-by-member, component-by-component
+    walk. Lone roots, the many robots of large batches, are keyed by their configuration
+    object (a batch shares a few) a member at a time, with arrays."""
     first = scenarios[0]
     poses = [s.initial_poses() for s in scenarios]
-    by_key = defaultdict(list)
     known: dict = {}
     plans: dict[tuple, np.ndarray] = {}
     by_rate: dict[float, np.ndarray] = {}
@@ -369,40 +405,69 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
             by_rate[rate] = plans[parts]
         return by_rate[rate]
 
-    lone: dict[tuple, tuple] = {}   # lone roots of one law and goal kind have one shape
-    tagged: dict[tuple, tuple] = {}   # and those of one configuration object (a batch shares a few)
-    components, shapes = first.components(), []
-    for component in components:
-        robot = first.robots[component[0]]
-        if len(component) == 1 and isinstance(robot, Robot):
-            tag = (id(robot.controller), robot.goal is None)
-            if tag not in tagged:
-                key = (robot.controller.controller.gain_tuple, _structure(robot, {}))
-                if key not in lone:
-                    lone[key] = shape([robot])
-                tagged[tag] = lone[key]
-            shapes.append(tagged[tag])
-        else:
-            shapes.append(shape([first.robots[i] for i in component]))
+    keys: dict[tuple, int] = {}   # each group's key (laws, structure, id of its plan), numbered
+    prior_of: dict[int, np.ndarray] = {}
+
+    def number(laws_structure, robots) -> int:
+        """The number of the group of a copy of shape ``laws_structure`` made of ``robots``."""
+        prior = plan_of(_prior_rate(robots, v_peak, omega_peak, known))
+        prior_of[id(prior)] = prior
+        return keys.setdefault((*laws_structure, id(prior)), len(keys))
+
+    components = first.components()
+    if len(components) == len(first.robots):   # lone roots only (no links): component k is robot k
+        lone, formations, lone_robots = range(len(components)), [], range(len(components))
+    else:
+        lone = [k for k, c in enumerate(components) if len(c) == 1 and isinstance(first.robots[c[0]], Robot)]
+        formations = sorted(set(range(len(components))).difference(lone))
+        lone_robots = [components[k][0] for k in lone]
+    # Lone roots of one configuration object have one shape (its law says whether they have a
+    # goal), as have those of one law and goal kind: a batch's roots share a few objects.
+    configs = np.fromiter((id(first.robots[i].controller) for i in lone_robots), np.int64, len(lone))
+    config_first, config_at = first_seen(configs)
+    shapes: dict[tuple, tuple] = {}   # each shape and its number
+    config_shapes = []   # each configuration object's (shape, number)
+    for b in config_first.tolist():
+        robot = first.robots[lone_robots[b]]
+        key = (robot.controller.controller.gain_tuple, _structure(robot, {}))
+        if key not in shapes:
+            shapes[key] = (shape([robot]), len(shapes))
+        config_shapes.append(shapes[key])
+    shape_at = np.array([n for _, n in config_shapes], dtype=np.int64)[config_at]   # each lone root's shape
+    formation_shapes = [shape([first.robots[i] for i in components[k]]) for k in formations]
     # Each copy (a component of a member) gets the plan of its own rates known in advance, as
     # it would alone: members that differ in gains are grouped by their plans.
-    priors = {}
-    lone_keys: dict[tuple, tuple] = {}   # a lone root's key, by its shape and configuration object
+    codes = np.empty((len(scenarios), len(components)), dtype=np.int64)
     for member, scenario in enumerate(scenarios):
         robots = scenario.robots
-        for component, laws_structure in zip(components, shapes):
-            robot = robots[component[0]]
-            tag = (id(laws_structure), id(robot.controller)) if len(component) == 1 and isinstance(robot, Robot) \
-                else None
-            key = lone_keys.get(tag) if tag else None
-            if key is None:
-                prior = plan_of(_prior_rate([robots[i] for i in component], v_peak, omega_peak, known))
-                key = (*laws_structure, id(prior))
-                priors[key] = prior
-                if tag:
-                    lone_keys[tag] = key
-            by_key[key].append((member, component))
-    return [Group(scenarios, copies, key[0], priors[key], v_d0, poses) for key, copies in by_key.items()]
+        if lone:   # one number per distinct (configuration object, shape)
+            if member:
+                configs = np.fromiter((id(robots[i].controller) for i in lone_robots), np.int64, len(lone))
+                pair_first, pair_at = first_seen(first_seen(configs)[1] * len(shapes) + shape_at)
+            else:   # (member 0's configuration objects, found above, decide its shapes)
+                pair_first, pair_at = config_first, config_at
+            numbers = [number(config_shapes[config_at[b]][0], [robots[lone_robots[b]]]) for b in pair_first.tolist()]
+            codes[member, lone] = np.array(numbers, dtype=np.int64)[pair_at]
+        for k, laws_structure in zip(formations, formation_shapes):
+            codes[member, k] = number(laws_structure, [robots[i] for i in components[k]])
+    flat = codes.ravel()   # member by member, component by component
+    walk = np.argsort(flat, kind="stable")   # each group's copies together, in walk order
+    walked = flat[walk]
+    bounds = [0, *(np.flatnonzero(walked[1:] != walked[:-1]) + 1).tolist(), flat.size]
+    spans = sorted(zip(bounds[:-1], bounds[1:]), key=lambda span: walk[span[0]])
+    key_of = {n: key for key, n in keys.items()}
+    first_robots = np.arange(len(components)) if not formations else np.array([c[0] for c in components])
+    groups = []
+    for start, end in spans:   # (groups in the order of their first copies)
+        copies = walk[start:end]
+        members, at = np.divmod(copies, len(components))
+        if len(components[at[0]]) == 1:
+            index = first_robots[at][:, None]
+        else:
+            index = np.array([components[k] for k in at.tolist()], dtype=np.intp)
+        key = key_of[int(flat[copies[0]])]
+        groups.append(Group(scenarios, members, index, key[0], prior_of[key[-1]], v_d0, poses))
+    return groups
 
 
 ON_DIVERGENCE = ("raise", "report")
@@ -441,7 +506,9 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
     rec_rows = kn.record_rows(bool(first.followers))   # no link rows without followers
     records = None if record else np.empty((rec_rows, 0, n_robots, n_members))
     substeps = np.zeros((n_robots, n_members), dtype=np.int64)   # each member's own
-    component_of = {c[0]: k for k, c in enumerate(first.components())}
+    component_of = np.arange(n_robots)   # by a component's first robot (robot k if all are alone)
+    if len(first.components()) < n_robots:
+        component_of[[c[0] for c in first.components()]] = np.arange(len(first.components()))
     reference_cache: dict[bytes, tuple] = {}
     rk4_steps = 0
     for group in _groups(scenarios, v_peak, omega_peak, v_d0):
@@ -453,14 +520,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
         else:
             g_stats, g_pairs, g_record = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
                                                         grid)
-            most = np.ones(len(group.copies), dtype=np.int64)
+            most = np.ones(group.members.size, dtype=np.int64)
         if record and records is None:   # one group of every robot of every member: its record is the record
             records = g_record if _whole(group, n_robots, n_members) else \
                 np.empty((rec_rows, n_steps + 1, n_robots, n_members))
-        members = np.array([member for member, _ in group.copies])
-        index = np.array([indices for _, indices in group.copies])   # (copies, robots of the graph)
+        members, index = group.members, group.index   # (copies,), (copies, robots of the graph)
         stats[:, index, members[:, None]] = np.moveaxis(g_stats, 1, 2)
-        pair_stats[:, [component_of[indices[0]] for _, indices in group.copies], members] = g_pairs
+        pair_stats[:, component_of[index[:, 0]], members] = g_pairs
         if record and records is not g_record:
             _merge_record(records, g_record, index, members)
         substeps[index, members[:, None]] = most[:, None]
@@ -498,9 +564,8 @@ def _merge_record(records: np.ndarray, g_record: np.ndarray, index: np.ndarray, 
 
 def _whole(group: Group, n_robots: int, n_members: int) -> bool:
     """Whether ``group`` holds every robot of every member, in scenario and member order."""
-    robots = list(range(n_robots))
-    return len(group.copies) == n_members and all(
-        member == b and list(indices) == robots for b, (member, indices) in enumerate(group.copies))
+    return group.index.shape == (n_members, n_robots) and (group.members == np.arange(n_members)).all() and \
+        (group.index == np.arange(n_robots)).all()
 
 
 class PlannedGroup:
@@ -670,10 +735,14 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     # fresh pages, 9.8 instead of 5.4 ms, without nonholo.cli.tune_memory's settings).
     full = _plan_tables(scenario, dt, plan, cache_)   # the first plan's, until a window is planned again
     rows, row_start, times, targets = _window_tables(scenario, group, dt, plan, full, *spans[0])
-    state, branch = start.copy(), group.initial_branches()
-    stats, pair_stats = kn.new_stats(n_robots, n_batch)
+
+    def initial() -> tuple:
+        """The run's state, bearings, statistics, pair statistics and held commands at t = 0."""
+        return (start.copy(), group.initial_branches(), *kn.new_stats(n_robots, n_batch),
+                np.zeros((kn.HELD_COUNT, n_robots, n_batch)))
+
+    state, branch, stats, pair_stats, held = initial()
     records = np.empty((kn.record_rows(group.followers), n_steps + 1 if record else 0, n_robots, n_batch))
-    held = np.zeros((kn.HELD_COUNT, n_robots, n_batch))
     step_rate = np.zeros(n_steps + 1)
     bar = _progress_bar(show and not whole, n_steps, scenario.name, n_robots * n_batch)
     kept = []   # each window's stage rows (reference, times), as integrated
@@ -682,7 +751,8 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
     live = None   # the copies integrated: all, or (a tracking group's) those run again
     try:
         for w, (k0, k1) in enumerate(spans):
-            saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 else []
+            # (what a run again puts back: a copy, or at t = 0 the initial values made again)
+            saved = [array.copy() for array in (state, branch, stats, pair_stats, held)] if attempts > 1 and k0 else []
             replanned = w > 0   # (the first span's tables are made above)
             pieces = [(a, b) for a, b in windows if k0 <= a and b <= k1]
             for attempt in range(attempts):
@@ -728,7 +798,7 @@ def _run_rk4(kernel: kn.Kernel, scenario: Scenario, group: Group, record: bool, 
                                           > group.rate_factor * (1.0 - OWN_RATE_MARGIN))
                     if not live.size:
                         break
-                for array, copy in zip((state, branch, stats, pair_stats, held), saved):
+                for array, copy in zip((state, branch, stats, pair_stats, held), saved or initial()):
                     if live is None:
                         array[...] = copy
                     else:
@@ -825,8 +895,8 @@ def _check_diverged(group: Group, stats: np.ndarray) -> None:
     if not finite.all():
         names = [robot.name for robot, ok in zip(group.robots, finite) if not ok]
         shown = ", ".join(repr(name) for name in names[:5]) + (" …" if len(names) > 5 else "")
-        members = sorted({member for (member, _), failed in zip(group.copies, bad.any(axis=0)) if failed})
-        batch = "" if len({member for member, _ in group.copies}) == 1 else \
+        members = np.unique(group.members[bad.any(axis=0)]).tolist()
+        batch = "" if (group.members == group.members[0]).all() else \
             f" in {len(members)} member(s) of the batch (the first: member {members[0]}; on_divergence=\"report\" " \
             "completes the batch and marks them)"
         raise SimulationError(

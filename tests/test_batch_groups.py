@@ -1,0 +1,113 @@
+"""How a batch's copies are grouped for the kernel (``nonholo.sim.simulator._groups``): checked
+against the rule written out plainly, one copy at a time, and against runs alone."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from nonholo import examples, references
+from nonholo.control.registry import controller
+from nonholo.sim import simulator as sm
+from nonholo.sim.files import load_scenario
+from nonholo.sim.scenario import Robot, Scenario
+
+
+def test_first_seen_numbers_values_in_order_of_first_appearance():
+    first, at = sm.first_seen(np.array([5, 3, 5, 7, 3, 3]))
+    assert first.tolist() == [0, 1, 3]
+    assert at.tolist() == [0, 1, 0, 2, 1, 1]
+    first, at = sm.first_seen(np.array([], dtype=np.int64))
+    assert first.size == 0 and at.size == 0
+    rng = np.random.default_rng(0)   # small sets are numbered in Python, larger ones with numpy
+    for size in (1, sm.SMALL_SET - 1, sm.SMALL_SET, 500):
+        values = rng.integers(0, max(2, size // 4), size) * 7919
+        first, at = sm.first_seen(values)
+        plain = list(dict.fromkeys(values.tolist()))
+        assert values[first].tolist() == plain
+        assert first.tolist() == [values.tolist().index(v) for v in plain]
+        assert at.tolist() == [plain.index(v) for v in values.tolist()]
+
+
+def plain_groups(scenarios, v_peak, omega_peak):
+    """The grouping rule one copy at a time: (member, component) walked member by member,
+    component by component; copies of one group share root laws, structure and the prior
+    plan of their own rates; groups in the order of their first copies."""
+    first = scenarios[0]
+    groups: dict[tuple, list] = {}
+    for member, scenario in enumerate(scenarios):
+        for component in first.components():
+            robots = [scenario.robots[i] for i in component]
+            local = {robot.name: j for j, robot in enumerate(robots)}
+            laws = tuple(dict.fromkeys((r.controller.law, r.controller.controller.gain_tuple)
+                                       for r in robots if isinstance(r, Robot)))
+            rate = sm._prior_rate(robots, v_peak, omega_peak, {})
+            key = (laws, tuple(sm._structure(r, local) for r in robots), sm.prior_parts(first, rate))
+            groups.setdefault(key, []).append((member, tuple(component)))
+    return list(groups.values())
+
+
+def mixed_scenario(seed: int) -> Scenario:
+    """Lone tracking roots under two laws, a few sharing a configuration object and some
+    with gains of their own (some stiff enough for a plan of their own), posture roots, and
+    a formation (a leader and two followers)."""
+    rng = np.random.default_rng(seed)
+    shared = controller("dynamic-feedback")
+    stiff = controller("dynamic-feedback", kd=40.0)
+    other = controller("kanayama")
+    polar = controller("polar")
+    chain = load_scenario(examples.path("formation-eight-triangle"))
+    robots = list(chain.robots)
+    for i in range(40):
+        pick = rng.integers(5)
+        config = (shared, stiff, other, controller("dynamic-feedback", kp=float(rng.uniform(1, 3))), polar)[pick]
+        goal = tuple(rng.normal(size=3)) if config is polar else None
+        robots.insert(int(rng.integers(len(robots) + 1)), Robot(f"r{i}", config, tuple(rng.normal(scale=0.3, size=3)),
+                                                               goal=goal))
+    return Scenario(references.eight(), robots, dt=0.05, duration=2.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_groups_follow_the_plain_rule(seed):
+    base = mixed_scenario(seed)
+    rng = np.random.default_rng(seed + 10)
+    # members that differ in gains, so that a position's copies split over groups
+    members = [base] + [dataclasses.replace(base, robots=tuple(
+        dataclasses.replace(r, controller=controller("dynamic-feedback", kd=float(rng.choice([0.7, 40.0]))))
+        if isinstance(r, Robot) and r.controller.name == "dynamic-feedback" and rng.random() < 0.5 else r
+        for r in base.robots)) for _ in range(3)]
+    v_peak, omega_peak = sm._reference_survey(base)
+    groups = sm._groups(members, v_peak, omega_peak, 0.5)
+    expected = plain_groups(members, v_peak, omega_peak)
+    assert [group.copies for group in groups] == expected
+    assert len(expected) >= 6   # (the case is not trivial: laws, structures and plans differ)
+    for group in groups:
+        assert group.index.shape == (len(group.members), len(group.robots))
+        for b, (member, indices) in enumerate(group.copies):   # each copy's starts, limits and gains
+            for j, i in enumerate(indices):
+                robot = members[member].robots[i]
+                assert tuple(group.state[:3, j, b]) == members[member].initial_poses()[i]
+                assert (group.limits[0, j, b], group.limits[1, j, b]) == (robot.v_max, robot.omega_max)
+                if isinstance(robot, Robot):
+                    gains = robot.controller.gain_vector()
+                    start = 3 if robot.posture else 0
+                    assert group.fields[start:start + len(gains), j, b].tolist() == list(gains)
+
+
+def test_a_batch_of_lone_roots_is_one_group_in_scenario_order():
+    shared = controller("dynamic-feedback")
+    robots = [Robot(f"r{i}", shared, (0.1 * i, 0.0, 0.0)) for i in range(50)]
+    scenario = Scenario(references.eight(), robots, dt=0.05, duration=1.0)
+    (group,) = sm._groups([scenario], *sm._reference_survey(scenario), 0.5)
+    assert group.members.tolist() == [0] * 50 and group.index[:, 0].tolist() == list(range(50))
+    assert not sm._whole(group, 50, 1)   # (copies of one robot: not every robot of a member per copy)
+    assert group.state[0, 0].tolist() == [0.1 * i for i in range(50)]
+
+
+def test_mixed_batch_equals_each_member_alone():
+    scenario = mixed_scenario(3)
+    together = sm.simulate([scenario, scenario], record=False)
+    alone = sm.simulate(scenario, record=False)
+    for member in range(2):
+        np.testing.assert_array_equal(together.stats[..., member], alone.stats[..., 0])
