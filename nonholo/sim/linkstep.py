@@ -167,8 +167,9 @@ def integrate_linked(integrate, evaluate, args, scenario, group, outputs, progre
     period = scenario.dt * every
     instants = len(range(0, n_steps + 1, every))
     n_robots, n_batch = state.shape[1:]
-    names = [[group.scenarios[m].robots[i].name for i in indices] for m, indices in group.copies]
-    settings = [group.scenarios[m].network for m, _ in group.copies]
+    copies = group.copies
+    names = [[group.scenarios[m].robots[i].name for i in indices] for m, indices in copies]
+    settings = [group.scenarios[m].network for m, _ in copies]
     schedule, depth = group_schedules(settings, names, group.parents, instants, period)
     watchdog = np.empty((4, n_batch))
     for b, links in enumerate(settings):

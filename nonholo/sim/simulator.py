@@ -234,7 +234,8 @@ class Group:
 
     @property
     def copies(self) -> list[tuple[int, tuple[int, ...]]]:
-        """(member, robot indices parents-first) of each copy."""
+        """(member, robot indices parents-first) of each copy (a new list: ``members`` and
+        ``index`` are the arrays)."""
         return list(zip(self.members.tolist(), map(tuple, self.index.tolist())))
 
     def targets(self, times: np.ndarray) -> np.ndarray:
@@ -423,10 +424,12 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         lone_robots = [components[k][0] for k in lone]
     # Lone roots of one configuration object have one shape (its law says whether they have a
     # goal), as have those of one law and goal kind: a batch's roots share a few objects.
-    configs = np.fromiter((id(first.robots[i].controller) for i in lone_robots), np.int64, len(lone))
-    config_first, config_at = first_seen(configs)
+    n_members, n_lone = len(scenarios), len(lone)
+    configs = np.fromiter((id(s.robots[i].controller) for s in scenarios for i in lone_robots), np.int64,
+                          n_members * n_lone)   # member by member
+    config_first, config_at = first_seen(configs[:n_lone])   # (the first member's)
     shapes: dict[tuple, tuple] = {}   # each shape and its number
-    config_shapes = []   # each configuration object's (shape, number)
+    config_shapes = []   # each of the first member's configuration objects: its (shape, number)
     for b in config_first.tolist():
         robot = first.robots[lone_robots[b]]
         key = (robot.controller.controller.gain_tuple, _structure(robot, {}))
@@ -436,20 +439,21 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     shape_at = np.array([n for _, n in config_shapes], dtype=np.int64)[config_at]   # each lone root's shape
     formation_shapes = [shape([first.robots[i] for i in components[k]]) for k in formations]
     # Each copy (a component of a member) gets the plan of its own rates known in advance, as
-    # it would alone: members that differ in gains are grouped by their plans.
-    codes = np.empty((len(scenarios), len(components)), dtype=np.int64)
-    for member, scenario in enumerate(scenarios):
-        robots = scenario.robots
-        if lone:   # one number per distinct (configuration object, shape)
-            if member:
-                configs = np.fromiter((id(robots[i].controller) for i in lone_robots), np.int64, len(lone))
-                pair_first, pair_at = first_seen(first_seen(configs)[1] * len(shapes) + shape_at)
-            else:   # (member 0's configuration objects, found above, decide its shapes)
-                pair_first, pair_at = config_first, config_at
-            numbers = [number(config_shapes[config_at[b]][0], [robots[lone_robots[b]]]) for b in pair_first.tolist()]
-            codes[member, lone] = np.array(numbers, dtype=np.int64)[pair_at]
-        for k, laws_structure in zip(formations, formation_shapes):
-            codes[member, k] = number(laws_structure, [robots[i] for i in components[k]])
+    # it would alone: members that differ in gains are grouped by their plans. Lone roots get
+    # one number per distinct (configuration object, shape) over all members; the numbers are
+    # handed out in the walk's order (so that the first copy found too stiff is the walk's).
+    pair_first, pair_at = first_seen(first_seen(configs)[1] * len(shapes) + np.tile(shape_at, n_members))
+    width = len(components)   # (a copy's place in the walk: member · width + component)
+    lone_todo = [(member * width + lone[b], config_shapes[config_at[b]][0], [scenarios[member].robots[lone_robots[b]]])
+                 for member, b in zip(*(part.tolist() for part in np.divmod(pair_first, max(n_lone, 1))))]
+    formation_todo = [(member * width + k, laws_structure, [scenario.robots[i] for i in components[k]])
+                      for member, scenario in enumerate(scenarios) for k, laws_structure in zip(formations, formation_shapes)]
+    numbered = {at: number(laws_structure, robots)
+                for at, laws_structure, robots in sorted(lone_todo + formation_todo, key=lambda item: item[0])}
+    codes = np.empty((n_members, width), dtype=np.int64)
+    codes[:, lone] = np.array([numbered[at] for at, _, _ in lone_todo], dtype=np.int64)[pair_at].reshape(n_members, n_lone)
+    for at, _, _ in formation_todo:
+        codes.flat[at] = numbered[at]
     flat = codes.ravel()   # member by member, component by component
     walk = np.argsort(flat, kind="stable")   # each group's copies together, in walk order
     walked = flat[walk]
@@ -616,7 +620,7 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
     for item in planned:
         group = item.group
         score = kernel_for(group.laws, group.followers).scorer(True)
-        columns = [list(indices) for _, indices in group.copies]
+        columns = group.index.tolist()
         g_states = np.ascontiguousarray(np.stack([states[:, :, c] for c in columns], axis=-1))
         g_helds = np.ascontiguousarray(np.stack([helds[:, :, c] for c in columns], axis=-1))
         g_stats, g_pairs = kn.new_stats(*group.state.shape[1:])
