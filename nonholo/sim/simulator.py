@@ -203,10 +203,10 @@ class Group:
         as_given = n_robots == 1 and n_batch == len(scenario.robots) and (members == members[0]).all() and \
             (index[:, 0] == np.arange(n_batch)).all()   # (a scenario of lone roots: its robots as they are)
         for j, robot in enumerate(robots):   # one position of the graph in every copy at once
-            at = index[:, j].tolist()
             if as_given:
                 column, starts = scenario.robots, chain.from_iterable(poses[member_list[0]])
             else:
+                at = index[:, j].tolist()
                 column = [scenarios[m].robots[i] for m, i in zip(member_list, at)]
                 starts = chain.from_iterable(poses[m][i] for m, i in zip(member_list, at))
             self.state[:3, j] = np.fromiter(starts, float, 3 * n_batch).reshape(n_batch, 3).T
@@ -381,7 +381,7 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
     together: root laws, structure and the sub-step plan of their own rates known in advance.
     Groups and their copies come in the order of a member-by-member, component-by-component
     walk. Lone roots, the many robots of large batches, are keyed by their configuration
-    object (a batch shares a few) a member at a time, with arrays."""
+    object (a batch shares a few), all members at once, with arrays."""
     first = scenarios[0]
     poses = [s.initial_poses() for s in scenarios]
     known: dict = {}
@@ -422,36 +422,38 @@ def _groups(scenarios: list[Scenario], v_peak: float, omega_peak: float, v_d0: f
         lone = [k for k, c in enumerate(components) if len(c) == 1 and isinstance(first.robots[c[0]], Robot)]
         formations = sorted(set(range(len(components))).difference(lone))
         lone_robots = [components[k][0] for k in lone]
-    # Lone roots of one configuration object have one shape (its law says whether they have a
-    # goal), as have those of one law and goal kind: a batch's roots share a few objects.
+    # A lone root's configuration object decides its shape (law, gains' names, goal kind: a
+    # tracking law takes no goal, a posture law needs one), and a batch's roots share a few
+    # objects: shapes are worked out once per object of the first member, by its positions.
     n_members, n_lone = len(scenarios), len(lone)
     configs = np.fromiter((id(s.robots[i].controller) for s in scenarios for i in lone_robots), np.int64,
                           n_members * n_lone)   # member by member
     config_first, config_at = first_seen(configs[:n_lone])   # (the first member's)
-    shapes: dict[tuple, tuple] = {}   # each shape and its number
-    config_shapes = []   # each of the first member's configuration objects: its (shape, number)
+    shapes: dict[tuple, tuple] = {}
+    config_shapes = []
     for b in config_first.tolist():
         robot = first.robots[lone_robots[b]]
         key = (robot.controller.controller.gain_tuple, _structure(robot, {}))
         if key not in shapes:
-            shapes[key] = (shape([robot]), len(shapes))
+            shapes[key] = shape([robot])
         config_shapes.append(shapes[key])
-    shape_at = np.array([n for _, n in config_shapes], dtype=np.int64)[config_at]   # each lone root's shape
     formation_shapes = [shape([first.robots[i] for i in components[k]]) for k in formations]
     # Each copy (a component of a member) gets the plan of its own rates known in advance, as
     # it would alone: members that differ in gains are grouped by their plans. Lone roots get
-    # one number per distinct (configuration object, shape) over all members; the numbers are
-    # handed out in the walk's order (so that the first copy found too stiff is the walk's).
-    pair_first, pair_at = first_seen(first_seen(configs)[1] * len(shapes) + np.tile(shape_at, n_members))
+    # one number per distinct configuration object over all members; the numbers are handed
+    # out in the walk's order (so that the first copy found too stiff is the walk's).
+    pair_first, pair_at = first_seen(configs)
     width = len(components)   # (a copy's place in the walk: member · width + component)
-    lone_todo = [(member * width + lone[b], config_shapes[config_at[b]][0], [scenarios[member].robots[lone_robots[b]]])
+    lone_todo = [(member * width + lone[b], config_shapes[config_at[b]], [scenarios[member].robots[lone_robots[b]]])
                  for member, b in zip(*(part.tolist() for part in np.divmod(pair_first, max(n_lone, 1))))]
     formation_todo = [(member * width + k, laws_structure, [scenario.robots[i] for i in components[k]])
-                      for member, scenario in enumerate(scenarios) for k, laws_structure in zip(formations, formation_shapes)]
+                      for member, scenario in enumerate(scenarios)
+                      for k, laws_structure in zip(formations, formation_shapes)]
     numbered = {at: number(laws_structure, robots)
                 for at, laws_structure, robots in sorted(lone_todo + formation_todo, key=lambda item: item[0])}
     codes = np.empty((n_members, width), dtype=np.int64)
-    codes[:, lone] = np.array([numbered[at] for at, _, _ in lone_todo], dtype=np.int64)[pair_at].reshape(n_members, n_lone)
+    lone_numbers = np.array([numbered[at] for at, _, _ in lone_todo], dtype=np.int64)
+    codes[:, lone] = lone_numbers[pair_at].reshape(n_members, n_lone)
     for at, _, _ in formation_todo:
         codes.flat[at] = numbered[at]
     flat = codes.ravel()   # member by member, component by component
