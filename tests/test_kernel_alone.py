@@ -15,6 +15,15 @@ from nonholo.sim.scenario import Robot, Scenario
 from nonholo.sim.simulator import kernel_for, simulate
 
 COPIES = kn.ALONE_BELOW + 3   # enough copies for the loops over the batch
+# Laws whose batches are also run with limits that bind (their time loop with limits; the
+# others' batches run the one without, ``Kernel.roots``): the limits' code is the same for
+# every law, and each further law compiled both ways costs a fresh suite seconds.
+LIMITED = ("dynamic-feedback", "kanayama", "nonlinear")
+
+
+def limited(name: str) -> dict:
+    """Actuator limits that bind at the start for the laws in ``LIMITED``, none for the others."""
+    return dict(v_max=0.5, omega_max=0.6) if name in LIMITED else {}
 
 
 def runs(scenario: Scenario, spread: float = 1.0):
@@ -38,14 +47,14 @@ def assert_same(one, many, rtol=1e-12):
 @pytest.mark.parametrize("name", sorted(CONTROLLERS))
 @pytest.mark.parametrize("substeps", [None, 4])
 def test_alone_equals_the_batch_loops_for_every_tracking_law(name, substeps):
-    # actuator limits that bind at the start: saturation counts and peaks are compared too.
-    # Planned sub-steps (None) come from the rates the copies meet, one plan per batch:
-    # identical copies, so that the batch plans as the single run does; given ones, copies
-    # from different starts.
-    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
+    # actuator limits that bind at the start (``LIMITED``): saturation counts and peaks are
+    # compared too. Planned sub-steps (None) come from the rates the copies meet, one plan per
+    # batch: identical copies, so that the batch plans as the single run does; given ones,
+    # copies from different starts.
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), **limited(name))
     one, many = runs(Scenario(references.eight(), [robot], duration=20.0, dt=0.01, substeps=substeps),
                      spread=0.0 if substeps is None else 1.0)
-    assert one.stats[kn.SAT_V, 0, 0] + one.stats[kn.SAT_W, 0, 0] > 0   # the limits acted
+    assert (one.stats[kn.SAT_V, 0, 0] + one.stats[kn.SAT_W, 0, 0] > 0) == (name in LIMITED)   # the limits acted
     assert np.array_equal(one.substeps, many.substeps)
     assert_same(one, many)
 
@@ -144,17 +153,42 @@ def test_unrecorded_batches_add_each_sample_in_the_step_s_loop_alike(name):
     # unrecorded, ``roots`` adds the sample at t_k to the statistics inside the RK4 step's
     # loop; recorded, in a loop of its own after it: the same statistics to rounding (LLVM may
     # fuse a multiply-add in one loop and not the other), the same event counts (limits that
-    # bind, two sub-steps per output step, copies past one chunk)
-    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6)
+    # bind for the laws in ``LIMITED``, two sub-steps per output step, copies past one chunk)
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), **limited(name))
     scenario = Scenario(references.eight(), [robot], duration=2.0, dt=0.01, substeps=2)
     members = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(2.0 + 0.01 * i, -1.5, 0.3)),))
                for i in range(kn.ROOTS_CHUNK + 3)]
     recorded, unrecorded = simulate(members), simulate(members, record=False)
-    assert recorded.stats[kn.SAT_V].sum() + recorded.stats[kn.SAT_W].sum() > 0   # the limits acted
+    assert (recorded.stats[kn.SAT_V].sum() + recorded.stats[kn.SAT_W].sum() > 0) == (name in LIMITED)
     a, b = recorded.stats, unrecorded.stats
     assert np.array_equal(np.isinf(a), np.isinf(b))
     assert np.allclose(np.where(np.isinf(a), 0, a), np.where(np.isinf(b), 0, b), rtol=1e-14, atol=0)
     assert np.array_equal(a[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]], b[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]])
+
+
+@pytest.mark.parametrize("name", ["dynamic-feedback", "polar"])
+@pytest.mark.parametrize("record", [False, True])
+def test_batches_without_limits_run_a_time_loop_of_their_own_with_the_same_numbers(name, record):
+    # copies without limits run ``roots``' time loop that calls the law alone, not clipped by
+    # inf limits: the same trajectories, statistics and event counts, bit for bit, as with
+    # limits that never bind. Dynamic feedback (v = ξ): LLVM merges the plant's v·cos θ with
+    # the law's ξ·cos θ there; a plant with multiply-adds fused then gave other last bits.
+    posture = name == "polar"
+    scenario = Scenario(None if posture else references.eight(),
+                        [Robot("r", controller(name), (2.0, -1.5, 0.3), goal=(0.0, 0.0, 0.0) if posture else None)],
+                        duration=8.0, dt=0.01)
+    members = [dataclasses.replace(scenario, robots=tuple(dataclasses.replace(r, start=(2.0 - 0.3 * i, -1.5, 0.3 * i))
+                                                          for r in scenario.robots)) for i in range(COPIES)]
+    wide = [dataclasses.replace(m, robots=tuple(dataclasses.replace(r, v_max=1e300, omega_max=1e300)
+                                                for r in m.robots)) for m in members]
+    free, clipped = simulate(members, record=record), simulate(wide, record=record)
+    assert np.array_equal(free.stats, clipped.stats) and np.array_equal(free.substeps, clipped.substeps)
+    if record:
+        assert np.array_equal(free.record, clipped.record)
+    assert not clipped.stats[[kn.SAT_V, kn.SAT_W]].any()
+    config = scenario.robots[0].controller
+    roots = kernel_for(((config.law, config.controller.gain_tuple),), False).roots
+    assert roots.time_loop.signatures and roots.limited_time_loop.signatures   # (each ran)
 
 
 def test_every_batch_of_a_law_runs_one_compiled_time_loop():

@@ -28,14 +28,12 @@ spread the range of the ratios of the same round.
 
 **Where the time goes** (``step_profile``, ``nonholo bench --profile``): the batch step taken
 apart with the kernel's own compiled pieces run alone over the same batch — one law evaluation
-as stage 1 makes it (``root_command``: sin/cos of θ, the law, the actuator limits) and one as
-stages 2–4 make it (sin/cos rotated from stage 1's, ``kernel.rotated_heading``), one RK4 step
-(four evaluations, the plant, the combination, stage by stage as the kernel runs them; the
-sample at t_k takes the first stage's command),
-the batch kernel's own time loop (``Kernel.roots``: the RK4 steps and the samples, whose
-errors, running statistics and event counts are what it adds to them), and a run of two steps
-(the Python set-up and result) — and the single run taken apart into the reference table, the
-recording and the rest.
+as stage 1 makes it (``root_command``: sin/cos of θ, the law; the batch has no limits) and one
+as stages 2–4 make it (sin/cos rotated from stage 1's, ``kernel.rotated_heading``), the sample
+at t_k (errors, running statistics and event counts, ``_probe_samples``), the batch kernel's
+own time loop (``Kernel.roots``: what it takes beyond the evaluations and the sample is the
+plant and the RK4 combination), and a run of two steps (the Python set-up and result) — and
+the single run taken apart into the reference table, the recording and the rest.
 """
 from __future__ import annotations
 
@@ -251,8 +249,9 @@ _PROBE = dict(error_model="numpy", fastmath={"contract"})   # as the kernel of l
 
 @njit(**_PROBE)
 def _probe_commands(law, gains, state, rows, n_steps, sink):
-    """One saturated law evaluation per robot and step as RK4 stage 1 makes it
-    (``root_command``: sin/cos of θ in full, the law, the limits)."""
+    """One law evaluation per robot and step as RK4 stage 1 makes it (``root_command``: sin/cos
+    of θ in full, the law; the limits, inf constants, folded away as the batch's time loop
+    without limits leaves them out)."""
     for k in range(n_steps):
         ref = kn.row_values(rows, 2 * k)
         for b in range(state.shape[1]):
@@ -263,9 +262,9 @@ def _probe_commands(law, gains, state, rows, n_steps, sink):
 
 @njit(**_PROBE)
 def _probe_rotated_commands(law, gains, state, heading, rows, n_steps, sink):
-    """One saturated law evaluation per robot and step as RK4 stages 2–4 make it: sin/cos of
-    θ + δ rotated from stage 1's (``heading``: sin θ, cos θ per robot; δ = 5·10⁻³, in range),
-    the law, the limits."""
+    """One law evaluation per robot and step as RK4 stages 2–4 make it: sin/cos of θ + δ
+    rotated from stage 1's (``heading``: sin θ, cos θ per robot; δ = 5·10⁻³, in range), the
+    law (the limits folded away, as in ``_probe_commands``)."""
     for k in range(n_steps):
         ref = kn.row_values(rows, 2 * k + 1)
         for b in range(state.shape[1]):
@@ -277,53 +276,22 @@ def _probe_rotated_commands(law, gains, state, heading, rows, n_steps, sink):
 
 
 @njit(**_PROBE)
-def _probe_rk4(law, gains, state, rows, h, n_steps):
-    """One RK4 step per robot and step, stage by stage as ``Kernel.roots`` runs it (``ROOTS_CHUNK``
-    robots at a time through the whole time range, a loop over them per stage, the rates k1,
-    k2, k3 and stage 1's sin θ, cos θ kept between the stages; four evaluations, stages 2–4
-    rotating stage 1's sin/cos in a loop before theirs, the plant, the combination), without the
-    sample at t_k and the kernel's workspace."""
+def _probe_samples(state, rows, n_steps, stats):
+    """The sample at t_k alone, as ``Kernel.roots`` adds it in stage 1's loop: each robot's
+    errors against the reference row and its running statistics and event counts updated
+    (``root_errors``, ``add_sample``), ``ROOTS_CHUNK`` robots at a time through the whole time
+    range (their statistics in the core's caches, as the kernel's); ξ and θ̇ = 0 stand for the
+    command (v, ω)."""
     n = state.shape[1]
-    slope = np.empty((16, kn.ROOTS_CHUNK))
-    half, sixth = 0.5 * h, h / 6.0
     for start in range(0, n, kn.ROOTS_CHUNK):
         c0, c1 = np.uint64(start), np.uint64(min(start + kn.ROOTS_CHUNK, n))
         for k in range(n_steps):
-            r0, r1, r2 = kn.row_values(rows, 2 * k), kn.row_values(rows, 2 * k + 1), kn.row_values(rows, 2 * k + 2)
+            ref = kn.row_values(rows, 2 * k)
             for b in range(c0, c1):
-                v, omega, xi_dot, _, _, _, c, si = kn.root_command(law, gains, state[0, b], state[1, b], state[2, b],
-                                                                   state[3, b], r0, np.inf, np.inf)
-                i = b - c0
-                slope[0, i], slope[1, i], slope[2, i], slope[3, i] = v * c, v * si, omega, xi_dot
-                slope[12, i], slope[13, i] = si, c
-            for s in range(1, 3):
-                p, q = 4 * s - 4, 4 * s
-                for b in range(c0, c1):   # (the stage's sin/cos in a loop of its own, as the kernel)
-                    i = b - c0
-                    slope[14, i], slope[15, i] = kn.rotated_heading(slope[12, i], slope[13, i], half * slope[p + 2, i],
-                                                                    state[2, b] + half * slope[p + 2, i])
-                for b in range(c0, c1):
-                    i = b - c0
-                    si, c = slope[14, i], slope[15, i]
-                    v, omega, xi_dot, _, _, _ = kn.law_command(
-                        law, gains, state[0, b] + half * slope[p, i], state[1, b] + half * slope[p + 1, i],
-                        state[2, b] + half * slope[p + 2, i], si, c, state[3, b] + half * slope[p + 3, i], r1, np.inf,
-                        np.inf)
-                    slope[q, i], slope[q + 1, i], slope[q + 2, i], slope[q + 3, i] = v * c, v * si, omega, xi_dot
-            for b in range(c0, c1):
-                i = b - c0
-                slope[14, i], slope[15, i] = kn.rotated_heading(slope[12, i], slope[13, i], h * slope[10, i],
-                                                                state[2, b] + h * slope[10, i])
-            for b in range(c0, c1):
-                i = b - c0
-                si, c = slope[14, i], slope[15, i]
-                v, omega, xi_dot, _, _, _ = kn.law_command(
-                    law, gains, state[0, b] + h * slope[8, i], state[1, b] + h * slope[9, i],
-                    state[2, b] + h * slope[10, i], si, c, state[3, b] + h * slope[11, i], r2, np.inf, np.inf)
-                state[0, b] = kn.rk4_sum(state[0, b], sixth, slope[0, i], slope[4, i], slope[8, i], v * c)
-                state[1, b] = kn.rk4_sum(state[1, b], sixth, slope[1, i], slope[5, i], slope[9, i], v * si)
-                state[2, b] = kn.rk4_sum(state[2, b], sixth, slope[2, i], slope[6, i], slope[10, i], omega)
-                state[3, b] = kn.rk4_sum(state[3, b], sixth, slope[3, i], slope[7, i], slope[11, i], xi_dot)
+                x, y, theta, xi = state[0, b], state[1, b], state[2, b], state[3, b]
+                err1, err2 = kn.root_errors(False, stats, 0, b, x, y, theta, ref)
+                kn.store_stats(stats, 0, b, kn.add_sample(kn.robot_stats(stats, 0, b), ref[0], k, xi, 0.0, 0.0, 0.0,
+                                                          0.0, err1, err2))
 
 
 PROFILE_PARTS = (
@@ -370,12 +338,12 @@ def step_profile(robots: int = BATCH_ROBOTS, duration: float = BATCH_DURATION, r
         "setup": lambda: simulate(short, record=False),
         "command": lambda: _probe_commands(law, gains, state, rows, n_steps, sink),
         "rotated": lambda: _probe_rotated_commands(law, gains, state, heading, rows, n_steps, sink),
-        "rk4": lambda: _probe_rk4(law, gains, state.copy(), rows, DT, n_steps),
+        "sample": lambda: _probe_samples(state, rows, n_steps, kn.new_stats(1, robots)[0]),
         "kernel": kernel_alone, "step": lambda: simulate(batch, record=False)}, rounds)
     ns = {name: 1e9 * statistics.median(values) / (robots * n_steps) for name, values in times.items()}
     law_ns = ns["command"] + 3.0 * ns["rotated"]   # stage 1's evaluation, and stages 2–4's
-    parts = {"law": law_ns, "plant_rk4": ns["rk4"] - law_ns,
-             "sample": ns["kernel"] - ns["rk4"], "setup": ns["setup"], "step": ns["step"]}
+    parts = {"law": law_ns, "plant_rk4": ns["kernel"] - law_ns - ns["sample"],
+             "sample": ns["sample"], "setup": ns["setup"], "step": ns["step"]}
     parts["rest"] = parts["step"] - sum(parts[name] for name in ("law", "plant_rk4", "sample", "setup"))
     say("the single run's parts")
     single = single_scenario()

@@ -284,6 +284,14 @@ def law_command(law, gains, x, y, theta, sin_t, cos_t, xi, ref, v_max, omega_max
     return v, omega, xi_dot, singular, sat_v, sat_w
 
 
+def law_only(law, gains, x, y, theta, sin_t, cos_t, xi, ref):
+    """A root's command at one state, sin θ and cos θ given, without limits: (v, ω, ξ̇,
+    singular) as ``law_command`` with inf limits gives them (``saturate`` with inf limits
+    returns v and ω unchanged, NaN and −0.0 included, and no flag)."""
+    v, omega, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
+    return v, omega, xi_dot, singular
+
+
 def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
     """A root's saturated command at one state: (v, ω, ξ̇, singular, sat v, sat ω, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
@@ -383,17 +391,27 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
 # (the kernels that call them are, with their code inside).
 # ``law_command`` (called by both, and by ``Kernel.roots`` with sin/cos of its own) has no
 # arithmetic of its own to fuse, only the limits' comparisons: one variant serves both.
+# ``law_only`` is ``law_command`` without the limits (``Kernel.roots`` of copies that have
+# none). ``plant_rates`` is the model's ``unicycle_rates`` with IEEE products, for every root's
+# RK4 stage: without limits v is the law's own value, and LLVM merges the plant's v·cos θ with
+# the same product in the law (dynamic feedback: v = ξ, and the law's ξ·cos θ), one multiply
+# fewer; the law's products are not fused into multiply-adds, and so the plant's are not
+# either, in every lone root's code alike: a copy in a batch, with limits or without, and a
+# robot alone give the same numbers to the last bit.
 # ``stage_sincos`` and ``stage_rotation`` are ``sincos`` and ``rotated_sincos`` as the lone
 # roots' kernels compile them (fused multiply-adds: the same numbers as in their
 # ``root_command`` and ``root_rk4``), for ``Kernel.roots``'s time loop: inlined by numba, their
 # code was copied into that loop at each call site (1.5 s more of a fresh install's
 # compiling per law).
 law_command = njit(error_model="numpy", fastmath=False)(law_command)
+law_only = njit(error_model="numpy", fastmath=False)(law_only)
+plant_rates = njit(error_model="numpy", fastmath=False)(unicycle_rates.py_func)
 stage_sincos = njit(error_model="numpy", fastmath={"contract"})(sincos.py_func)
 stage_rotation = njit(error_model="numpy", fastmath={"contract"})(rotated_sincos.py_func)
 root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
 root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
-for _function, _name in ((law_command, "law_command"), (stage_sincos, "stage_sincos"),
+for _function, _name in ((law_command, "law_command"), (law_only, "law_only"), (plant_rates, "plant_rates"),
+                         (stage_sincos, "stage_sincos"),
                          (stage_rotation, "stage_rotation"), (root_command_exact, "root_command_exact"),
                          (root_command, "root_command")):
     _function._set_uuid(f"{__name__}.{_name}")
@@ -429,19 +447,19 @@ def _make_root_rk4(heading, fastmath):
         half = 0.5 * h
         s1, co1 = sincos(theta)
         v1, w1, e1, singular, sat_v, sat_w = law_command(law, gains, x, y, theta, s1, co1, xi, r0, v_max, omega_max)
-        a1, b1, c1 = unicycle_rates(v1, w1, co1, s1)
+        a1, b1, c1 = plant_rates(v1, w1, co1, s1)
         x2, y2, t2, xi2 = x + half * a1, y + half * b1, theta + half * c1, xi + half * e1
         s, co = heading(s1, co1, half * c1, t2)
         v2, w2, e2, _, _, _ = law_command(law, gains, x2, y2, t2, s, co, xi2, r1, v_max, omega_max)
-        a2, b2, c2 = unicycle_rates(v2, w2, co, s)
+        a2, b2, c2 = plant_rates(v2, w2, co, s)
         x3, y3, t3, xi3 = x + half * a2, y + half * b2, theta + half * c2, xi + half * e2
         s, co = heading(s1, co1, half * c2, t3)
         v3, w3, e3, _, _, _ = law_command(law, gains, x3, y3, t3, s, co, xi3, r1, v_max, omega_max)
-        a3, b3, c3 = unicycle_rates(v3, w3, co, s)
+        a3, b3, c3 = plant_rates(v3, w3, co, s)
         x4, y4, t4, xi4 = x + h * a3, y + h * b3, theta + h * c3, xi + h * e3
         s, co = heading(s1, co1, h * c3, t4)
         v4, w4, e4, _, _, _ = law_command(law, gains, x4, y4, t4, s, co, xi4, r2, v_max, omega_max)
-        a4, b4, c4 = unicycle_rates(v4, w4, co, s)
+        a4, b4, c4 = plant_rates(v4, w4, co, s)
         sixth = h / 6.0
         return ((rk4_sum(x, sixth, a1, a2, a3, a4), rk4_sum(y, sixth, b1, b2, b3, b4),
                  rk4_sum(theta, sixth, c1, c2, c3, c4), rk4_sum(xi, sixth, e1, e2, e3, e4)),
@@ -758,8 +776,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
       helds (N+1, HELD_COUNT, R, B)), by the same code;
     * ``roots``: ``integrate`` (same arguments) for lone roots under continuous-time control,
       ``ROOTS_CHUNK`` copies at a time through the whole time loop, each sample taken from the
-      first stage of the RK4 step that starts at it (no fifth law evaluation); None for
-      graphs with followers;
+      first stage of the RK4 step that starts at it (no fifth law evaluation); a call whose
+      copies have no limits (all inf) runs a time loop without the clipping (the same
+      numbers); None for graphs with followers;
     * ``alone``: ``integrate`` for lone roots under continuous-time control one robot at a
       time, state and statistics in registers (fewer than ``ALONE_BELOW`` copies): the
       module's ``integrate_alone``, the same compiled code for every law (``LoneRoot``
@@ -1118,16 +1137,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             stats[STEP_RATE, r, b] = max(stats[STEP_RATE, r, b], k1[RATE_ROW, b - c0] * wide)
 
     @njit(inline="always", **_OPTIONS)
-    def root_stage(r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, ref):
-        """Copy b of root r at one RK4 stage (sin θ and cos θ given): its rates (ẋ, ẏ, θ̇, ξ̇)
-        and command (v, ω, singular, sat v, sat ω)."""
-        v, omega, xi_dot, singular, sat_v, sat_w = law_command(
-            law_a, gains_a(*field_row(fields, r, b)[:n_a]), x, y, theta, sin_t, cos_t, xi, ref, limits[0, r, b],
-            limits[1, r, b])
-        dx, dy, dtheta = unicycle_rates(v, omega, cos_t, sin_t)
-        return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
-
-    @njit(inline="always", **_OPTIONS)
     def stage_headings(r, c0, c1, state, step, k_in, widest, trig):
         """sin θ and cos θ at RK4 stage 2, 3 or 4 (θ + δ, δ = step·k_in[θ]) of copies c0 … c1 − 1
         of root r, into ``trig``'s rows 2 and 3, by ``rotated_heading``'s rule: rotated from
@@ -1146,133 +1155,159 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 wide = not abs(step * k_in[2, i]) <= ROTATION_MAX
                 trig[2, i], trig[3, i] = (sin_t, cos_t) if wide else (trig[2, i], trig[3, i])
 
-    @njit(inline="always", **_OPTIONS)
-    def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, widest, k_out, peak, trig):
-        """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2, its
-        largest |θ̇| ``widest``), at t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3).
-        Returns the largest rate so far (``peak``) when measuring, and k_out's largest |θ̇|.
-        ``k_in`` and ``k_out`` are arrays of their own, arguments of ``run_roots``: rows of one
-        array chosen by a variable left LLVM unable to tell the rows read from the rows
-        written, and the loop ran 2.7x slower."""
-        stage_headings(r, c0, c1, state, half, k_in, widest, trig)
-        for b in range(c0, c1):
-            i = b - c0
-            x, y = state[0, r, b] + half * k_in[0, i], state[1, r, b] + half * k_in[1, i]
-            theta, xi = state[2, r, b] + half * k_in[2, i], state[3, r, b] + half * k_in[3, i]
-            dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[2, i],
-                                                                trig[3, i], xi, ref)
-            k_out[0, i], k_out[1, i], k_out[2, i], k_out[3, i] = dx, dy, dtheta, dxi
-            k_out[RATE_ROW, i] = tracking_rate(dtheta)
-            if measuring:
-                peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-        return peak, largest_rate(k_out, np.int64(c1 - c0))
+    def time_loop(limited: bool):
+        """``roots``' compiled time loop (``run_roots``) for copies with actuator limits
+        (``limited``) or for copies without any (every limit inf, which clips nothing: the law's
+        command as it is, no saturation flags, the same numbers). Each is compiled on its first
+        use: a law's batches without limits never compile the other."""
 
-    @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
-    def run_roots(workspace, c1, rows, row_start, substeps, xi_speed, dt, k_start, k_stop, n_steps, record,
-                  record_at, step_rate):
-        """``roots``' time loop for the first c1 copies (unsigned) of one robot, held in
-        ``workspace`` (``new_workspace``; its parts named as ``workspace_views`` names them),
-        ``record`` the simulator's record, where the workspace's copy b of its robot is
-        ``record``'s robot and copy ``record_at`` + (0, b): the whole array, not a slice, so that
-        every batch runs one compiled time loop (a slice of it was a C array or not, two
-        compilations of this function per law). An RK4 step runs
-        stage by stage, one loop over the copies each, ``k1``, ``k2`` and ``k3`` keeping each
-        copy's stage rates (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``k1`` its first
-        stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
-        short enough for the processor to overlap the dependent chains of successive copies,
-        which a body of all four stages (longer than its reorder window) was not. The same
-        operations as ``root_rk4``, in the same order."""
-        r, c0 = 0, np.uint64(0)   # (robot 0 and copy 0 of the workspace's arrays)
-        state, stats, fields, limits, sample, k1, k2, k3, trig = workspace_views(workspace)
-        for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
-            row = row_start[k]
-            if k == n_steps:   # the last sample's command is no RK4 stage: the law alone
-                ref = row_values(rows, row)
-                for b in range(c0, c1):
-                    x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    sin_t, cos_t = stage_sincos(theta)
-                    _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta, sin_t,
-                                                                               cos_t, xi, ref)
-                    keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, record_at, step_rate)
-                break
-            m = substeps[k]
-            h = dt / m
-            half, sixth = 0.5 * h, h / 6.0
-            wide = wide_substep(substeps, k, n_steps, dt)
-            # Unrecorded, the sample at t_k goes to the statistics in the first stage's own loop:
-            # their stores then overlap the stage's arithmetic.
-            inline_sample = record.shape[1] == 0 and not measuring
-            for j in range(m):
-                r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
-                    row_values(rows, row + 2 * j + 2)
-                peak = 0.0
-                if j == 0 and inline_sample:   # stage 1 and the sample at t_k (its command: stage 1's)
+        @njit(inline="always", **_OPTIONS)
+        def root_stage(r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, ref):
+            """Copy b of root r at one RK4 stage (sin θ and cos θ given): its rates (ẋ, ẏ, θ̇, ξ̇)
+            and command (v, ω, singular, sat v, sat ω); without limits the law's own (``law_only``)."""
+            gains = gains_a(*field_row(fields, r, b)[:n_a])
+            if limited:
+                v, omega, xi_dot, singular, sat_v, sat_w = law_command(law_a, gains, x, y, theta, sin_t, cos_t, xi, ref,
+                                                                       limits[0, r, b], limits[1, r, b])
+            else:
+                v, omega, xi_dot, singular = law_only(law_a, gains, x, y, theta, sin_t, cos_t, xi, ref)
+                sat_v, sat_w = 0.0, 0.0
+            dx, dy, dtheta = plant_rates(v, omega, cos_t, sin_t)
+            return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
+
+        @njit(inline="always", **_OPTIONS)
+        def middle_stage(r, c0, c1, state, fields, limits, half, ref, xi_speed, k_in, widest, k_out, peak, trig):
+            """RK4 stage 2 or 3 of copies c0 … c1 − 1 of root r: from x + h/2·k_in (k1 or k2, its
+            largest |θ̇| ``widest``), at t + h/2 (``ref``), its rates into ``k_out`` (k2 or k3).
+            Returns the largest rate so far (``peak``) when measuring, and k_out's largest |θ̇|.
+            ``k_in`` and ``k_out`` are arrays of their own, arguments of ``run_roots``: rows of one
+            array chosen by a variable left LLVM unable to tell the rows read from the rows
+            written, and the loop ran 2.7x slower."""
+            stage_headings(r, c0, c1, state, half, k_in, widest, trig)
+            for b in range(c0, c1):
+                i = b - c0
+                x, y = state[0, r, b] + half * k_in[0, i], state[1, r, b] + half * k_in[1, i]
+                theta, xi = state[2, r, b] + half * k_in[2, i], state[3, r, b] + half * k_in[3, i]
+                dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[2, i],
+                                                                    trig[3, i], xi, ref)
+                k_out[0, i], k_out[1, i], k_out[2, i], k_out[3, i] = dx, dy, dtheta, dxi
+                k_out[RATE_ROW, i] = tracking_rate(dtheta)
+                if measuring:
+                    peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+            return peak, largest_rate(k_out, np.int64(c1 - c0))
+
+        @njit(**NOALIAS, **_OPTIONS)   # (its arrays are distinct: ``roots`` makes the scratch, the simulator the rest)
+        def run_roots(workspace, c1, rows, row_start, substeps, xi_speed, dt, k_start, k_stop, n_steps, record,
+                      record_at, step_rate):
+            """``roots``' time loop for the first c1 copies (unsigned) of one robot, held in
+            ``workspace`` (``new_workspace``; its parts named as ``workspace_views`` names them),
+            ``record`` the simulator's record, where the workspace's copy b of its robot is
+            ``record``'s robot and copy ``record_at`` + (0, b): the whole array, not a slice, so that
+            every batch runs one compiled time loop (a slice of it was a C array or not, two
+            compilations of this function per law). An RK4 step runs
+            stage by stage, one loop over the copies each, ``k1``, ``k2`` and ``k3`` keeping each
+            copy's stage rates (rows ẋ, ẏ, θ̇, ξ̇) for the next stages, and ``k1`` its first
+            stage's rate too (row ``RATE_ROW``, for ``step_rate``): the body of one stage is
+            short enough for the processor to overlap the dependent chains of successive copies,
+            which a body of all four stages (longer than its reorder window) was not. The same
+            operations as ``root_rk4``, in the same order."""
+            r, c0 = 0, np.uint64(0)   # (robot 0 and copy 0 of the workspace's arrays)
+            state, stats, fields, limits, sample, k1, k2, k3, trig = workspace_views(workspace)
+            for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
+                row = row_start[k]
+                if k == n_steps:   # the last sample's command is no RK4 stage: the law alone
+                    ref = row_values(rows, row)
                     for b in range(c0, c1):
-                        i = b - c0
                         x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
                         sin_t, cos_t = stage_sincos(theta)
-                        dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
-                                                                                            theta, sin_t, cos_t, xi, r0)
-                        k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
-                        trig[0, i], trig[1, i] = sin_t, cos_t
-                        err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
-                        store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
-                                                             sat_v, sat_w, err1, err2))
-                        k1[RATE_ROW, i] = tracking_rate(omega)
-                    keep_step_rate(stats, r, c0, c1, k1, wide)
-                    peak = largest_rate(k1, np.int64(c1 - c0))
-                else:   # stage 1, its command kept for the sample (``add_samples``)
-                    # (the first lines of the two stage-1 loops as one inline function stopped
-                    # LLVM vectorizing both: 27 instead of 12 ns per robot-step)
-                    for b in range(c0, c1):
-                        i = b - c0
-                        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                        sin_t, cos_t = stage_sincos(theta)
-                        dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y,
-                                                                                            theta, sin_t, cos_t, xi, r0)
-                        k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
-                        trig[0, i], trig[1, i] = sin_t, cos_t
-                        keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                        if measuring:
-                            k1[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                        else:
+                        _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta,
+                                                                                   sin_t, cos_t, xi, ref)
+                        keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                    add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, record_at, step_rate)
+                    break
+                m = substeps[k]
+                h = dt / m
+                half, sixth = 0.5 * h, h / 6.0
+                wide = wide_substep(substeps, k, n_steps, dt)
+                # Unrecorded, the sample at t_k goes to the statistics in the first stage's own loop:
+                # their stores then overlap the stage's arithmetic.
+                inline_sample = record.shape[1] == 0 and not measuring
+                for j in range(m):
+                    r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
+                        row_values(rows, row + 2 * j + 2)
+                    peak = 0.0
+                    if j == 0 and inline_sample:   # stage 1 and the sample at t_k (its command: stage 1's)
+                        for b in range(c0, c1):
+                            i = b - c0
+                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                            sin_t, cos_t = stage_sincos(theta)
+                            dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(
+                                r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, r0)
+                            k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
+                            trig[0, i], trig[1, i] = sin_t, cos_t
+                            err1, err2 = root_errors(posture_a, fields, r, b, x, y, theta, r0)
+                            store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), r0[0], k, v, omega, singular,
+                                                                 sat_v, sat_w, err1, err2))
                             k1[RATE_ROW, i] = tracking_rate(omega)
-                    if not measuring:
                         keep_step_rate(stats, r, c0, c1, k1, wide)
-                    peak = largest_rate(k1, np.int64(c1 - c0))
-                # (k1's largest rate bounds its |θ̇| = |ω|: ``tracking_rate``, or ``stage_rate``)
-                peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, peak, k2, peak,
-                                            trig)
-                peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, widest, k3, peak,
-                                            trig)
-                stage_headings(r, c0, c1, state, h, k3, widest, trig)
-                for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
-                    i = b - c0
-                    x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                    x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
-                        xi0 + h * k3[3, i]
-                    dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta, trig[2, i],
-                                                                        trig[3, i], xi, r2)
-                    state[0, r, b] = rk4_sum(x0, sixth, k1[0, i], k2[0, i], k3[0, i], dx)
-                    state[1, r, b] = rk4_sum(y0, sixth, k1[1, i], k2[1, i], k3[1, i], dy)
-                    state[2, r, b] = rk4_sum(theta0, sixth, k1[2, i], k2[2, i], k3[2, i], dtheta)
-                    state[3, r, b] = rk4_sum(xi0, sixth, k1[3, i], k2[3, i], k3[3, i], dxi)
-                    if measuring:
-                        peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
-                step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
-                if j == 0 and not inline_sample:
-                    add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
+                        peak = largest_rate(k1, np.int64(c1 - c0))
+                    else:   # stage 1, its command kept for the sample (``add_samples``)
+                        # (the first lines of the two stage-1 loops as one inline function stopped
+                        # LLVM vectorizing both: 27 instead of 12 ns per robot-step)
+                        for b in range(c0, c1):
+                            i = b - c0
+                            x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                            sin_t, cos_t = stage_sincos(theta)
+                            dx, dy, dtheta, dxi, v, omega, singular, sat_v, sat_w = root_stage(
+                                r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, r0)
+                            k1[0, i], k1[1, i], k1[2, i], k1[3, i] = dx, dy, dtheta, dxi
+                            trig[0, i], trig[1, i] = sin_t, cos_t
+                            keep_sample(sample, i, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
+                            if measuring:
+                                k1[RATE_ROW, i] = max(0.0, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                            else:
+                                k1[RATE_ROW, i] = tracking_rate(omega)
+                        if not measuring:
+                            keep_step_rate(stats, r, c0, c1, k1, wide)
+                        peak = largest_rate(k1, np.int64(c1 - c0))
+                    # (k1's largest rate bounds its |θ̇| = |ω|: ``tracking_rate``, or ``stage_rate``)
+                    peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, peak, k2,
+                                                peak, trig)
+                    peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k2, widest, k3,
+                                                peak, trig)
+                    stage_headings(r, c0, c1, state, h, k3, widest, trig)
+                    for b in range(c0, c1):   # stage 4 from x + h k3, at t + h, and the step
+                        i = b - c0
+                        x0, y0, theta0, xi0 = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
+                        x, y, theta, xi = x0 + h * k3[0, i], y0 + h * k3[1, i], theta0 + h * k3[2, i], \
+                            xi0 + h * k3[3, i]
+                        dx, dy, dtheta, dxi, v, omega, _, _, _ = root_stage(r, b, fields, limits, x, y, theta,
+                                                                            trig[2, i], trig[3, i], xi, r2)
+                        state[0, r, b] = rk4_sum(x0, sixth, k1[0, i], k2[0, i], k3[0, i], dx)
+                        state[1, r, b] = rk4_sum(y0, sixth, k1[1, i], k2[1, i], k3[1, i], dy)
+                        state[2, r, b] = rk4_sum(theta0, sixth, k1[2, i], k2[2, i], k3[2, i], dtheta)
+                        state[3, r, b] = rk4_sum(xi0, sixth, k1[3, i], k2[3, i], k3[3, i], dxi)
+                        if measuring:
+                            peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
+                    step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
+                    if j == 0 and not inline_sample:
+                        add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
+
+        return run_roots
+
+    run_limited, run_free = time_loop(True), time_loop(False)
 
     def roots(state, fields, limits, rows, row_start, substeps, targets, offsets, kinds, order, parents, feeds,
               branch, sin_floor, d_max, xi_speed, dt, hold_every, k_start, k_stop, n_steps, stats, pair_stats,
               record, held, step_rate, held_given):
         """``integrate`` (same arguments) for lone roots under continuous-time control:
         ``run_roots`` over ``ROOTS_CHUNK`` copies at a time, each chunk's rows copied into a
-        workspace and back. A Python loop over the chunks (a call each), not a compiled one: a
+        workspace and back (the time loop without limits when no copy has any: saturation was
+        ~9 % of a step, ``docs/performance.md``). A Python loop over the chunks (a call each), not a compiled one: a
         compiled caller optimized and generated ``run_roots``'s code a second time (2 s of a
         fresh install's compiling per law)."""
         n_batch = state.shape[2]
+        run_roots = run_free if np.isposinf(limits).all() else run_limited
         workspace = new_workspace()
         span = (np.int64(k_start), np.int64(k_stop), np.int64(n_steps))
         kept = tuple(zip(WORKSPACE_FIRST, WORKSPACE_COUNTS, (state, stats, fields, limits)))
@@ -1289,7 +1324,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                 for first, count, array in kept[:2]:   # (fields and limits are only read)
                     array[columns] = workspace[first:first + count, :stop - start]
 
-    roots.time_loop = run_roots   # (its compiled code, for a look at it: docs/performance.md)
+    roots.time_loop = run_free   # (their compiled code, for a look at it: docs/performance.md)
+    roots.limited_time_loop = run_limited
 
     # Inner compiled functions are closures too: give each an identity that names this
     # kernel's laws, so numba's disk cache finds them in the next process and never mixes
@@ -1297,7 +1333,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
         evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
-        + ((run_roots, add_samples) if not followers else ())}
+        + ((add_samples,) if not followers else ())}
+    if not followers:
+        inner.update(run_roots=run_limited, run_roots_free=run_free)
     for name, function in inner.items():
         function._set_uuid(f"{__name__}.make_kernel[{identity}].{name}")
     for function in inner.values():   # and every module-level function their code calls
