@@ -61,7 +61,7 @@ def test_saturation_limits_and_counts():
 def test_saturated_samples_count_samples_where_either_command_was_clipped(record):
     """``saturated_samples``: samples with v, ω or both clipped — not the larger of the two
     counts (here they overlap only in part), in batches too."""
-    robot = Robot("r", controller("nonlinear", zeta=0.7, b=3.0), (0.0, 0.0, 3.0), v_max=1.5, omega_max=0.4)
+    robot = Robot("r", controller("dynamic-feedback"), (0.0, 0.0, 3.0), v_max=1.5, omega_max=0.4)
     scenario = Scenario(references.circle(radius=3.0, period=20.0), [robot], duration=30.0, dt=0.01)
     recorded = simulate(scenario)
     v, omega = np.abs(recorded.v[0]), np.abs(recorded.omega[0])

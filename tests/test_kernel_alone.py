@@ -18,7 +18,7 @@ COPIES = kn.ALONE_BELOW + 3   # enough copies for the loops over the batch
 # Laws whose batches are also run with limits that bind (their time loop with limits; the
 # others' batches run the one without, ``Kernel.roots``): the limits' code is the same for
 # every law, and each further law compiled both ways costs a fresh suite seconds.
-LIMITED = ("dynamic-feedback", "kanayama", "nonlinear")
+LIMITED = ("dynamic-feedback", "kanayama")
 
 
 def limited(name: str) -> dict:
@@ -89,10 +89,10 @@ def test_several_lone_roots_of_two_laws_alone():
 def test_batches_past_one_chunk_integrate_every_copy_alike(name, substeps):
     # ``roots`` runs ROOTS_CHUNK copies at a time: copies in the second, partial chunk and on
     # both sides of the boundary follow the same trajectories as one copy alone (sub-steps
-    # fixed, and a posture law's measured ones)
+    # fixed, and a posture law's measured ones; limits that bind for the laws in ``LIMITED``)
     posture = name == "polar"
-    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), v_max=0.5, omega_max=0.6,
-                  goal=(0.0, 0.0, 0.0) if posture else None)
+    robot = Robot("r", controller(name), (2.0, -1.5, 0.3), goal=(0.0, 0.0, 0.0) if posture else None,
+                  **limited(name))
     scenario = Scenario(None if posture else references.eight(), [robot], duration=3.0, dt=0.01, substeps=substeps)
     copies = kn.ROOTS_CHUNK + 5
     members = [dataclasses.replace(scenario, robots=(dataclasses.replace(robot, start=(2.0 + 0.01 * i, -1.5, 0.3)),))
