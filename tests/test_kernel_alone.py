@@ -3,6 +3,7 @@ in registers); many copies run in loops over the batch (``Kernel.roots``). Both 
 the same trajectories, statistics and event counts, for every law, with limits, singular
 passages, sub-steps and posture goals."""
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -165,6 +166,18 @@ def test_unrecorded_batches_add_each_sample_in_the_step_s_loop_alike(name):
     assert np.array_equal(np.isinf(a), np.isinf(b))
     assert np.allclose(np.where(np.isinf(a), 0, a), np.where(np.isinf(b), 0, b), rtol=1e-14, atol=0)
     assert np.array_equal(a[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]], b[[kn.SAT_V, kn.SAT_W, kn.SINGULAR]])
+
+
+def test_inf_limits_clip_nothing():
+    # the premise of ``Kernel.roots``' time loop without limits: clipping to inf limits returns
+    # every command as it is (NaN, signed zeros and infinities included) and flags nothing
+    values = [math.nan, -0.0, 0.0, math.inf, -math.inf, 1e308, -5e-324, 3.5]
+    for v in values:
+        for omega in values:
+            clipped = kn.saturate(v, omega, math.inf, math.inf)
+            assert np.array_equal(np.array(clipped[:2]), np.array([v, omega]), equal_nan=True)
+            assert [math.copysign(1.0, x) for x in clipped[:2]] == [math.copysign(1.0, v), math.copysign(1.0, omega)]
+            assert clipped[2:] == (0.0, 0.0)
 
 
 @pytest.mark.parametrize("record", [False, True])
