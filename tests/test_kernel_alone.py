@@ -203,18 +203,46 @@ def test_batches_without_limits_run_a_time_loop_of_their_own_with_the_same_numbe
     assert roots.time_loop.signatures and roots.limited_time_loop.signatures   # (each ran)
 
 
+def test_a_batch_with_limits_on_some_copies_clips_each_copy_by_its_own():
+    # copies with both limits, none, only v_max or only omega_max in one batch: the time loop
+    # with limits runs them all (the one without is for batches where every limit is inf), each
+    # copy clipped by its own limits and equal to itself alone, bit for bit
+    base = Robot("r", controller("dynamic-feedback"), (2.0, -1.5, 0.3))
+    scenario = Scenario(references.eight(), [base], duration=4.0, dt=0.01, substeps=2)
+    limits = [dict(v_max=0.5, omega_max=0.6), {}, dict(omega_max=0.6), dict(v_max=0.5), {},
+              dict(v_max=0.5, omega_max=0.6), {}, {}]
+    members = [dataclasses.replace(scenario, robots=(dataclasses.replace(base, start=(2.0 - 0.3 * i, -1.5, 0.3 * i),
+                                                                         **given),)) for i, given in enumerate(limits)]
+    many = simulate(members)
+    rows = list(range(kn.ROBOT_STATS))
+    for i, given in enumerate(limits):
+        one = simulate(members[i])
+        assert np.array_equal(one.record[..., 0], many.record[..., i])
+        assert np.array_equal(one.stats[rows, 0, 0], many.stats[rows, 0, i])
+        assert many.stats[kn.SAT_V, 0, i] == 0 or "v_max" in given   # (no clipping without a limit)
+        assert many.stats[kn.SAT_W, 0, i] == 0 or "omega_max" in given
+        assert np.abs(many.record[kn.REC_V, :, 0, i]).max() <= given.get("v_max", math.inf)
+        assert np.abs(many.record[kn.REC_OMEGA, :, 0, i]).max() <= given.get("omega_max", math.inf)
+    assert many.stats[kn.SAT_V, 0, 3] > 0 and many.stats[kn.SAT_W, 0, 2] > 0   # the one-sided limits acted
+
+
 def test_every_batch_of_a_law_runs_one_compiled_time_loop():
     # recorded or not, in one chunk or several: ``run_roots`` is compiled once per law (the
     # record it writes is the simulator's whole array, never a slice whose layout varies:
-    # each further signature cost a fresh install 5-8 s of compiling per law)
-    config = controller("kanayama")
+    # each further signature cost a fresh install 5-8 s of compiling per law); with limits and
+    # without alike (dynamic feedback: the suite compiles both of its loops anyway)
+    config = controller("dynamic-feedback")
     robot = Robot("r", config, (2.0, -1.5, 0.3))
     scenario = Scenario(references.eight(), [robot], duration=0.5, dt=0.01)
     for copies, record in ((kn.ALONE_BELOW + 3, True), (kn.ROOTS_CHUNK + 3, True), (kn.ALONE_BELOW + 3, False),
                            (kn.ROOTS_CHUNK + 3, False)):
         simulate([scenario] * copies, record=record)
-    loop = kernel_for(((config.law, config.controller.gain_tuple),), False).roots.time_loop
-    assert len(loop.signatures) == 1
+    roots = kernel_for(((config.law, config.controller.gain_tuple),), False).roots
+    assert len(roots.time_loop.signatures) == 1
+    for copies, record in ((kn.ALONE_BELOW + 3, True), (kn.ROOTS_CHUNK + 3, False)):   # and the loop with limits
+        simulate([dataclasses.replace(scenario, robots=(dataclasses.replace(robot, v_max=1.0),))] * copies,
+                 record=record)
+    assert len(roots.limited_time_loop.signatures) == 1
 
 
 def test_integrate_refuses_what_it_leaves_to_roots_and_alone():

@@ -397,7 +397,8 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
 # the same product in the law (dynamic feedback: v = ξ, and the law's ξ·cos θ), one multiply
 # fewer; the law's products are not fused into multiply-adds, and so the plant's are not
 # either, in every lone root's code alike: a copy in a batch, with limits or without, and a
-# robot alone give the same numbers to the last bit.
+# robot alone give the same numbers to the last bit (for laws with IEEE arithmetic,
+# ``@control_law``'s default: a law that fuses its own products can differ in its last bits).
 # ``stage_sincos`` and ``stage_rotation`` are ``sincos`` and ``rotated_sincos`` as the lone
 # roots' kernels compile them (fused multiply-adds: the same numbers as in their
 # ``root_command`` and ``root_rk4``), for ``Kernel.roots``'s time loop: inlined by numba, their
