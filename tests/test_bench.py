@@ -44,3 +44,12 @@ def test_bench_help_names_the_profile():
                          timeout=60)
     assert run.returncode == 0 and "--profile" in run.stdout
     assert all(len(label) <= 46 for _, label, _, _ in bench_cli.TARGETS)
+
+
+def test_profile_parts_at_or_below_zero_read_as_about_zero():
+    # (a part that is a difference of medians can fall below zero within the noise)
+    for ns in (-0.3, 0.0):
+        line = bench_cli.part_line("the rest", ns, 8.9)
+        assert line.endswith("~0 ns per robot-step") and "-0" not in line and "%" not in line
+    line = bench_cli.part_line("law", 4.4, 8.8)
+    assert "4.4 ns per robot-step" in line and line.endswith("50 %") and len(line) <= 100
