@@ -289,6 +289,7 @@ def _probe_samples(state, rows, n_steps, stats):
             ref = kn.row_values(rows, 2 * k)
             for b in range(c0, c1):
                 x, y, theta, xi = state[0, b], state[1, b], state[2, b], state[3, b]
+                # (not a posture law: no goal read from the fields argument)
                 err1, err2 = kn.root_errors(False, stats, 0, b, x, y, theta, ref)
                 kn.store_stats(stats, 0, b, kn.add_sample(kn.robot_stats(stats, 0, b), ref[0], k, xi, 0.0, 0.0, 0.0,
                                                           0.0, err1, err2))

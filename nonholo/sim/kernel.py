@@ -284,14 +284,6 @@ def law_command(law, gains, x, y, theta, sin_t, cos_t, xi, ref, v_max, omega_max
     return v, omega, xi_dot, singular, sat_v, sat_w
 
 
-def law_only(law, gains, x, y, theta, sin_t, cos_t, xi, ref):
-    """A root's command at one state, sin θ and cos θ given, without limits: (v, ω, ξ̇,
-    singular) as ``law_command`` with inf limits gives them (``saturate`` with inf limits
-    returns v and ω unchanged, NaN and −0.0 included, and no flag)."""
-    v, omega, xi_dot, singular = law(x, y, theta, cos_t, sin_t, xi, ref, gains)
-    return v, omega, xi_dot, singular
-
-
 def root_command(law, gains, x, y, theta, xi, ref, v_max, omega_max):
     """A root's saturated command at one state: (v, ω, ξ̇, singular, sat v, sat ω, cos θ, sin θ)."""
     sin_t, cos_t = sincos(theta)
@@ -391,27 +383,26 @@ def store_stages(stage_pose, stage_command, r, b, s0, s1, s2, s3):
 # (the kernels that call them are, with their code inside).
 # ``law_command`` (called by both, and by ``Kernel.roots`` with sin/cos of its own) has no
 # arithmetic of its own to fuse, only the limits' comparisons: one variant serves both.
-# ``law_only`` is ``law_command`` without the limits (``Kernel.roots`` of copies that have
-# none). ``plant_rates`` is the model's ``unicycle_rates`` with IEEE products, for every root's
-# RK4 stage: without limits v is the law's own value, and LLVM merges the plant's v·cos θ with
-# the same product in the law (dynamic feedback: v = ξ, and the law's ξ·cos θ), one multiply
-# fewer; the law's products are not fused into multiply-adds, and so the plant's are not
-# either, in every lone root's code alike: a copy in a batch, with limits or without, and a
-# robot alone give the same numbers to the last bit (for laws with IEEE arithmetic,
-# ``@control_law``'s default: a law that fuses its own products can differ in its last bits).
+# ``plant_rates`` is the model's ``unicycle_rates`` with IEEE products, for every root's RK4
+# stage: without limits (``Kernel.roots``' loop that calls the law itself) v is the law's own
+# value, and LLVM merges the plant's v·cos θ with the same product in the law (dynamic
+# feedback: v = ξ, and the law's ξ·cos θ), one multiply fewer; the law's products are not
+# fused into multiply-adds, and so the plant's are not either, in every lone root's code
+# alike: a copy in a batch, with limits or without, and a robot alone give the same numbers
+# to the last bit (for laws with IEEE arithmetic, ``@control_law``'s default: a law that fuses
+# its own products can differ in its last bits).
 # ``stage_sincos`` and ``stage_rotation`` are ``sincos`` and ``rotated_sincos`` as the lone
 # roots' kernels compile them (fused multiply-adds: the same numbers as in their
 # ``root_command`` and ``root_rk4``), for ``Kernel.roots``'s time loop: inlined by numba, their
 # code was copied into that loop at each call site (1.5 s more of a fresh install's
 # compiling per law).
 law_command = njit(error_model="numpy", fastmath=False)(law_command)
-law_only = njit(error_model="numpy", fastmath=False)(law_only)
 plant_rates = njit(error_model="numpy", fastmath=False)(unicycle_rates.py_func)
 stage_sincos = njit(error_model="numpy", fastmath={"contract"})(sincos.py_func)
 stage_rotation = njit(error_model="numpy", fastmath={"contract"})(rotated_sincos.py_func)
 root_command_exact = njit(error_model="numpy", fastmath=False)(root_command)
 root_command = njit(error_model="numpy", fastmath={"contract"})(root_command)
-for _function, _name in ((law_command, "law_command"), (law_only, "law_only"), (plant_rates, "plant_rates"),
+for _function, _name in ((law_command, "law_command"), (plant_rates, "plant_rates"),
                          (stage_sincos, "stage_sincos"),
                          (stage_rotation, "stage_rotation"), (root_command_exact, "root_command_exact"),
                          (root_command, "root_command")):
@@ -1165,13 +1156,14 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         @njit(inline="always", **_OPTIONS)
         def root_stage(r, b, fields, limits, x, y, theta, sin_t, cos_t, xi, ref):
             """Copy b of root r at one RK4 stage (sin θ and cos θ given): its rates (ẋ, ẏ, θ̇, ξ̇)
-            and command (v, ω, singular, sat v, sat ω); without limits the law's own (``law_only``)."""
+            and command (v, ω, singular, sat v, sat ω); without limits the law's own, as
+            ``saturate`` with inf limits returns it (NaN and −0.0 included, no flag)."""
             gains = gains_a(*field_row(fields, r, b)[:n_a])
             if limited:
                 v, omega, xi_dot, singular, sat_v, sat_w = law_command(law_a, gains, x, y, theta, sin_t, cos_t, xi, ref,
                                                                        limits[0, r, b], limits[1, r, b])
             else:
-                v, omega, xi_dot, singular = law_only(law_a, gains, x, y, theta, sin_t, cos_t, xi, ref)
+                v, omega, xi_dot, singular = law_a(x, y, theta, cos_t, sin_t, xi, ref, gains)
                 sat_v, sat_w = 0.0, 0.0
             dx, dy, dtheta = plant_rates(v, omega, cos_t, sin_t)
             return dx, dy, dtheta, xi_dot, v, omega, singular, sat_v, sat_w
@@ -1304,9 +1296,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         """``integrate`` (same arguments) for lone roots under continuous-time control:
         ``run_roots`` over ``ROOTS_CHUNK`` copies at a time, each chunk's rows copied into a
         workspace and back (the time loop without limits when no copy has any: saturation was
-        ~9 % of a step, ``docs/performance.md``). A Python loop over the chunks (a call each), not a compiled one: a
-        compiled caller optimized and generated ``run_roots``'s code a second time (2 s of a
-        fresh install's compiling per law)."""
+        ~9 % of a step, ``docs/performance.md``). A Python loop over the chunks (a call each),
+        not a compiled one: a compiled caller optimized and generated ``run_roots``'s code a
+        second time (2 s of a fresh install's compiling per law)."""
         n_batch = state.shape[2]
         run_roots = run_free if np.isposinf(limits).all() else run_limited
         workspace = new_workspace()
