@@ -311,6 +311,18 @@ def test_a_run_shown_with_progress_equals_one_run_without(case):
     assert np.array_equal(whole.substeps, pieces.substeps)
 
 
+@pytest.mark.parametrize("case", ["roots", "roots-substeps", "roots-replanned"])
+def test_unrecorded_pieces_keep_the_final_errors_and_counts_of_a_recorded_run(case):
+    # unrecorded, ``Kernel.roots`` takes the sample at t_k in stage 1's loop, which leaves the
+    # final errors to the run's last sample (and, without limits, the saturation counts as
+    # they are): in 50 pieces too, every statistic is the recorded run's
+    members = _progress_cases()[case]
+    recorded = simulate(members, progress=False)
+    pieces = simulate(members, record=False, progress=True)
+    assert np.array_equal(recorded.stats, pieces.stats, equal_nan=True)
+    assert (recorded.stats[kn.E_FINAL] != recorded.stats[kn.E_MAX]).any()   # (final errors of their own)
+
+
 def _chain(duration: float) -> Scenario:
     return dataclasses.replace(load_scenario(examples.path("formation-chain")), duration=duration)
 
