@@ -1222,26 +1222,18 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             state, stats, fields, limits, sample, k1, k2, k3, trig = workspace_views(workspace)
             for k in range(k_start, k_stop + (1 if k_stop == n_steps else 0)):
                 row = row_start[k]
-                if k == n_steps:   # the last sample's command is no RK4 stage: the law alone
-                    ref = row_values(rows, row)
-                    for b in range(c0, c1):
-                        x, y, theta, xi = state[0, r, b], state[1, r, b], state[2, r, b], state[3, r, b]
-                        sin_t, cos_t = stage_sincos(theta)
-                        _, _, _, _, v, omega, singular, sat_v, sat_w = root_stage(r, b, fields, limits, x, y, theta,
-                                                                                   sin_t, cos_t, xi, ref)
-                        keep_sample(sample, b - c0, x, y, theta, xi, v, omega, singular, sat_v, sat_w)
-                    add_samples(sample, r, c0, c1, ref, k, posture_a, fields, stats, record, record_at, step_rate)
-                    break
-                m = substeps[k]
+                # The last sample's command is no RK4 step's: stage 1's loop alone takes it (one loop
+                # of the law fewer to compile; its stage rates are not used).
+                last = k == n_steps
+                m = 1 if last else substeps[k]
                 h = dt / m
                 half, sixth = 0.5 * h, h / 6.0
-                wide = wide_substep(substeps, k, n_steps, dt)
+                wide = 0.0 if last else wide_substep(substeps, k, n_steps, dt)
                 # Unrecorded, the sample at t_k goes to the statistics in the first stage's own loop:
-                # their stores then overlap the stage's arithmetic.
-                inline_sample = record.shape[1] == 0 and not measuring
+                # their stores then overlap the stage's arithmetic. (Never the last: ``next_stats``.)
+                inline_sample = record.shape[1] == 0 and not measuring and not last
                 for j in range(m):
-                    r0, r1, r2 = row_values(rows, row + 2 * j), row_values(rows, row + 2 * j + 1), \
-                        row_values(rows, row + 2 * j + 2)
+                    r0 = row_values(rows, row + 2 * j)
                     peak = 0.0
                     if j == 0 and inline_sample:   # stage 1 and the sample at t_k (its command: stage 1's)
                         for b in range(c0, c1):
@@ -1277,6 +1269,10 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                         if not measuring:
                             keep_step_rate(stats, r, c0, c1, k1, wide)
                         peak = largest_rate(k1, np.int64(c1 - c0))
+                    if last:
+                        add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
+                        break
+                    r1, r2 = row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2)
                     # (k1's largest rate bounds its |θ̇| = |ω|: ``tracking_rate``, or ``stage_rate``)
                     peak, widest = middle_stage(r, c0, c1, state, fields, limits, half, r1, xi_speed, k1, peak, k2,
                                                 peak, trig)
