@@ -607,6 +607,29 @@ def root_errors(posture, fields, r, b, x, y, theta, ref):
     return goal_errors(ref[REF_X], ref[REF_Y], ref[REF_THETA], x, y, theta)
 
 
+@njit(**_OPTIONS)   # (one function for every law: LLVM inlines it; per law, and copied by numba, it cost 1-2 s each)
+def add_samples(sample, r, c0, c1, ref, k, posture, measuring, fields, stats, record, record_at, step_rate):
+    """Add the samples ``keep_sample`` kept at output step k to the statistics and record of
+    ``Kernel.roots`` (copy b of robot r at ``record``'s robot and copy ``record_at`` + (r, b));
+    with ``measuring``, |ω| to ``step_rate``."""
+    t = ref[0]
+    for b in range(c0, c1):
+        i = b - c0
+        err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
+        store_stats(stats, r, b, add_sample(robot_stats(stats, r, b), t, k, sample[4, i], sample[5, i], sample[6, i],
+                                            sample[7, i], sample[8, i], err1, err2))
+    if record.shape[1] != 0:   # a loop of its own, as in ``accumulate``
+        for b in range(c0, c1):
+            i = b - c0
+            err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
+            store_record(record, k, record_at[0] + r, record_at[1] + b,
+                         record_row(sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i],
+                                    sample[5, i], err1, err2, sample[6, i], sample[7, i], sample[8, i]))
+    if measuring:
+        for i in range(c1 - c0):
+            step_rate[k] = max(step_rate[k], abs(sample[5, i]))
+
+
 @njit(**_OPTIONS)
 def run_alone(root, r, b, state, fields, limits, rows, row_start, substeps, dt, xi_speed, k_start, k_stop, n_steps,
               stats, record, step_rate, given):
@@ -1099,27 +1122,6 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i] = x, y, theta, xi, v
         sample[5, i], sample[6, i], sample[7, i], sample[8, i] = omega, singular, sat_v, sat_w
 
-    @njit(**_OPTIONS)   # (not inlined by numba: two call sites, 0.5-1 s of compiling per law; LLVM inlines it)
-    def add_samples(sample, r, c0, c1, ref, k, posture, fields, stats, record, record_at, step_rate):
-        """Add the samples ``keep_sample`` kept at output step k to the statistics and record
-        (copy b of robot r at ``record``'s robot and copy ``record_at`` + (r, b))."""
-        t = ref[0]
-        for b in range(c0, c1):
-            i = b - c0
-            err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
-            store_stats(stats, r, b, add_sample_(robot_stats(stats, r, b), t, k, sample[4, i], sample[5, i],
-                                                 sample[6, i], sample[7, i], sample[8, i], err1, err2))
-        if record.shape[1] != 0:   # a loop of its own, as in ``accumulate``
-            for b in range(c0, c1):
-                i = b - c0
-                err1, err2 = root_errors(posture, fields, r, b, sample[0, i], sample[1, i], sample[2, i], ref)
-                store_record(record, k, record_at[0] + r, record_at[1] + b,
-                             record_row(sample[0, i], sample[1, i], sample[2, i], sample[3, i], sample[4, i],
-                                        sample[5, i], err1, err2, sample[6, i], sample[7, i], sample[8, i]))
-        if measuring:
-            for i in range(c1 - c0):
-                step_rate[k] = max(step_rate[k], abs(sample[5, i]))
-
     @njit(inline="always", **_OPTIONS)
     def keep_step_rate(stats, r, c0, c1, k1, wide):
         """Each copy's ``STEP_RATE``: the largest of its rates (``k1``'s row ``RATE_ROW``,
@@ -1270,7 +1272,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                             keep_step_rate(stats, r, c0, c1, k1, wide)
                         peak = largest_rate(k1, np.int64(c1 - c0))
                     if last:
-                        add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
+                        add_samples(sample, r, c0, c1, r0, k, posture_a, measuring, fields, stats, record, record_at,
+                                    step_rate)
                         break
                     r1, r2 = row_values(rows, row + 2 * j + 1), row_values(rows, row + 2 * j + 2)
                     # (k1's largest rate bounds its |θ̇| = |ω|: ``tracking_rate``, or ``stage_rate``)
@@ -1294,7 +1297,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
                             peak = max(peak, stage_rate((x, y, theta, xi, dxi, v, omega), xi_speed))
                     step_rate[k] = max(step_rate[k], peak)   # (every lone root measures its rates)
                     if j == 0 and not inline_sample:
-                        add_samples(sample, r, c0, c1, r0, k, posture_a, fields, stats, record, record_at, step_rate)
+                        add_samples(sample, r, c0, c1, r0, k, posture_a, measuring, fields, stats, record, record_at,
+                                    step_rate)
 
         return run_roots
 
@@ -1335,8 +1339,7 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
     # two kernels up (see stable_cache_identity).
     identity = f"{law_a._MemoMixin__uuid}|{law_b._MemoMixin__uuid}|{int(followers)}"
     inner = {function.py_func.__name__: function for function in (
-        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)
-        + ((add_samples,) if not followers else ())}
+        evaluate_at, evaluate, accumulate, follower_stage, substep, update_branches, integrate, score)}
     if not followers:
         inner.update(run_roots=run_limited, run_roots_free=run_free)
     for name, function in inner.items():
