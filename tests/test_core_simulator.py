@@ -311,16 +311,25 @@ def test_a_run_shown_with_progress_equals_one_run_without(case):
     assert np.array_equal(whole.substeps, pieces.substeps)
 
 
-@pytest.mark.parametrize("case", ["roots", "roots-substeps", "roots-replanned"])
+def _limited_on_some(members: list[Scenario]) -> list[Scenario]:
+    """Every other member's robot with limits that bind (the loop with limits, for every copy)."""
+    return [dataclasses.replace(m, robots=tuple(dataclasses.replace(r, v_max=0.3, omega_max=0.5) for r in m.robots))
+            if i % 2 else m for i, m in enumerate(members)]
+
+
+@pytest.mark.parametrize("case", ["roots", "roots-substeps", "roots-replanned", "roots-limited"])
 def test_unrecorded_pieces_keep_the_final_errors_and_counts_of_a_recorded_run(case):
     # unrecorded, ``Kernel.roots`` takes the sample at t_k in stage 1's loop, which leaves the
     # final errors to the run's last sample (and, without limits, the saturation counts as
     # they are): in 50 pieces too, every statistic is the recorded run's
-    members = _progress_cases()[case]
+    members = _limited_on_some(_progress_cases()["roots"]) if case == "roots-limited" else _progress_cases()[case]
     recorded = simulate(members, progress=False)
     pieces = simulate(members, record=False, progress=True)
     assert np.array_equal(recorded.stats, pieces.stats, equal_nan=True)
     assert (recorded.stats[kn.E_FINAL] != recorded.stats[kn.E_MAX]).any()   # (final errors of their own)
+    if case == "roots-limited":   # (counts that move, on the copies with limits only)
+        counts = recorded.stats[[kn.SAT_V, kn.SAT_W, kn.SAT_ANY], 0]
+        assert (counts[:, 1::2] > 0).all() and not counts[:, ::2].any()
 
 
 def _chain(duration: float) -> Scenario:

@@ -607,7 +607,7 @@ def root_errors(posture, fields, r, b, x, y, theta, ref):
     return goal_errors(ref[REF_X], ref[REF_Y], ref[REF_THETA], x, y, theta)
 
 
-@njit(**_OPTIONS)   # (one function for every law: LLVM inlines it; per law, and copied by numba, it cost 1-2 s each)
+@njit(**_OPTIONS)   # (one for every law, two compiled: tracking and posture; LLVM inlines it. Per law it cost 1-2 s)
 def add_samples(sample, r, c0, c1, ref, k, posture, measuring, fields, stats, record, record_at, step_rate):
     """Add the samples ``keep_sample`` kept at output step k to the statistics and record of
     ``Kernel.roots`` (copy b of robot r at ``record``'s robot and copy ``record_at`` + (r, b));
@@ -1175,7 +1175,9 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             """``add_sample_`` for a sample at t_k that is not the run's last (stage 1's own loop):
             the final errors are left to the last sample, and without limits the saturation
             counts as they are (their flags are 0). LLVM then drops those rows' stores and loads
-            (3 % of a step)."""
+            (3 % of a step). So an unrecorded call that stops before t_N (k_stop < n_steps)
+            leaves E_FINAL and H_FINAL as they were: they are the run's once its last sample
+            is taken (``simulate`` always takes it)."""
             (e_mean, e_m2, e_sq, e_max, _, h_sum, h_sq, h_max, _, v_peak, v_peak_t, w_peak, w_peak_t, v_sq, w_sq,
              sat_v_sum, sat_w_sum, singular_sum, first_singular, sat_any_sum) = add_sample_(old, t, k, v, omega, singular,
                                                                                            sat_v, sat_w, err1, err2)
@@ -1312,7 +1314,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
         workspace and back (the time loop without limits when no copy has any: saturation was
         ~9 % of a step, ``docs/performance.md``). A Python loop over the chunks (a call each),
         not a compiled one: a compiled caller optimized and generated ``run_roots``'s code a
-        second time (2 s of a fresh install's compiling per law)."""
+        second time (2 s of a fresh install's compiling per law). Unrecorded, the final errors
+        (E_FINAL, H_FINAL) are written by the sample at t_N only (``next_stats``)."""
         n_batch = state.shape[2]
         run_roots = run_free if np.isposinf(limits).all() else run_limited
         workspace = new_workspace()
