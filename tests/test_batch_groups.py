@@ -136,3 +136,31 @@ def test_a_formation_of_two_root_laws_with_different_gain_counts():
         assert group.fields[:len(gains), j, 0].tolist() == list(gains)
         assert not group.fields[len(gains):, j, 0].any()
     assert group.fields[[sm.kn.K1, sm.kn.K2], 2, 0].tolist() == [1.5, 0.8]
+
+
+def _layouts():
+    """(index (copies, robots of the graph), members (copies,)) of groups as ``_groups`` makes
+    them: lone robots of one member side by side, one robot of many members, graphs of two
+    robots across members, and copies scattered over robots and members."""
+    return {
+        "lone robots of one member": (np.arange(2, 6)[:, None], np.full(4, 1)),
+        "one robot of every member": (np.full((5, 1), 3), np.arange(5)),
+        "graphs across members": (np.tile([4, 1], (3, 1)), np.array([0, 2, 4])),
+        "scattered": (np.array([[0], [6], [2], [5]]), np.array([3, 0, 4, 0])),
+    }
+
+
+@pytest.mark.parametrize("layout", list(_layouts()))
+def test_a_group_s_record_lands_where_its_index_says(layout):
+    # block copies where the copies lie side by side, element by element elsewhere: the same
+    # record as numpy's element-by-element assignment, link rows of a graph without them zero
+    index, members = _layouts()[layout]
+    rng = np.random.default_rng(1)
+    g_record = rng.normal(size=(10, 6, index.shape[1], index.shape[0]))
+    expected = np.full((15, 6, 7, 5), np.nan)
+    expected[:10, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
+    expected[10:, :, index, members[:, None]] = 0.0
+    merged = np.full_like(expected, np.nan)
+    sm._merge_record(merged, g_record, index, members)
+    np.testing.assert_array_equal(merged, expected)
+    assert np.isnan(merged).sum() == merged.size - 15 * 6 * index.size   # (nothing else written)

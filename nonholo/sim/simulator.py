@@ -531,11 +531,13 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
             records = g_record if _whole(group, n_robots, n_members) else \
                 np.empty((rec_rows, n_steps + 1, n_robots, n_members))
         members, index = group.members, group.index   # (copies,), (copies, robots of the graph)
-        stats[:, index, members[:, None]] = np.moveaxis(g_stats, 1, 2)
-        pair_stats[:, component_of[index[:, 0]], members] = g_pairs
+        for j in range(index.shape[1]):
+            at = _as_slices(index[:, j], members)
+            stats[(slice(None), *at)] = g_stats[:, j, :]
+            substeps[at] = most
+        pair_stats[(slice(None), *_as_slices(component_of[index[:, 0]], members))] = g_pairs
         if record and records is not g_record:
             _merge_record(records, g_record, index, members)
-        substeps[index, members[:, None]] = most[:, None]
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
     rows = None
@@ -563,9 +565,25 @@ def _merge_record(records: np.ndarray, g_record: np.ndarray, index: np.ndarray, 
     ``index`` (copies, robots of the graph) of ``members`` (copies,); link rows that the
     group does not record (a graph without followers, in a run with some) are zeros."""
     rows = g_record.shape[0]
-    records[:rows, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
-    if records.shape[0] > rows:
-        records[rows:, :, index, members[:, None]] = 0.0
+    for j in range(index.shape[1]):   # each robot of the graph, in every copy
+        at = _as_slices(index[:, j], members)
+        records[(slice(None, rows), slice(None), *at)] = g_record[:, :, j, :]
+        if records.shape[0] > rows:
+            records[(slice(rows, None), slice(None), *at)] = 0.0
+
+
+def _as_slices(robots: np.ndarray, members: np.ndarray) -> tuple:
+    """The positions (robot, member) of a group's copies in a run's arrays, as indices: a
+    slice along one axis where the copies lie side by side there (a batch of lone robots, a
+    batch of members), so that a record is copied as a block; else the two index arrays,
+    whose element-by-element copy took 140 ms for a recorded batch of 10³ robots x 2 000
+    steps (the kernel 56 ms)."""
+    n = robots.size
+    if n and (members == members[0]).all() and (robots == robots[0] + np.arange(n)).all():
+        return slice(int(robots[0]), int(robots[0]) + n), int(members[0])
+    if n and (robots == robots[0]).all() and (members == members[0] + np.arange(n)).all():
+        return int(robots[0]), slice(int(members[0]), int(members[0]) + n)
+    return robots, members
 
 
 def _whole(group: Group, n_robots: int, n_members: int) -> bool:
