@@ -101,7 +101,12 @@ def test_a_batch_of_lone_roots_is_one_group_in_scenario_order():
     scenario = Scenario(references.eight(), robots, dt=0.05, duration=1.0)
     (group,) = sm._groups([scenario], *sm._reference_survey(scenario), 0.5)
     assert group.members.tolist() == [0] * 50 and group.index[:, 0].tolist() == list(range(50))
-    assert not sm._whole(group, 50, 1)   # (copies of one robot: not every robot of a member per copy)
+    record = np.arange(10 * 3 * 50.0).reshape(10, 3, 1, 50)   # (copies of one robot: the member's robots in order)
+    view = sm._in_run_layout(group, record, 50, 1)
+    assert np.shares_memory(view, record) and view.shape == (10, 3, 50, 1)
+    merged = np.full_like(view, np.nan)
+    sm._merge_record(merged, record, group.index, group.members)
+    np.testing.assert_array_equal(view, merged)
     assert group.state[0, 0].tolist() == [0.1 * i for i in range(50)]
 
 
@@ -164,3 +169,26 @@ def test_a_group_s_record_lands_where_its_index_says(layout):
     sm._merge_record(merged, g_record, index, members)
     np.testing.assert_array_equal(merged, expected)
     assert np.isnan(merged).sum() == merged.size - 15 * 6 * index.size   # (nothing else written)
+
+
+@pytest.mark.parametrize("case", ["whole members", "lone robots", "robots reversed", "part of the robots"])
+def test_a_group_s_record_is_the_run_s_without_a_copy_only_where_its_memory_is_in_the_run_s_order(case):
+    # (robots of the graph, copies) read as (robots, members): the same memory in the same
+    # order for whole members and for a scenario's lone robots, not otherwise
+    index, members = {
+        "whole members": (np.tile(np.arange(3), (4, 1)), np.arange(4)),
+        "lone robots": (np.arange(12)[:, None], np.zeros(12, dtype=np.int64)),
+        "robots reversed": (np.arange(12)[::-1, None], np.zeros(12, dtype=np.int64)),
+        "part of the robots": (np.arange(6)[:, None], np.zeros(6, dtype=np.int64)),
+    }[case]
+    n_robots, n_members = (3, 4) if case == "whole members" else (12, 1)
+    group = type("G", (), {"index": index, "members": members})()
+    record = np.random.default_rng(2).normal(size=(10, 3, index.shape[1], index.shape[0]))
+    view = sm._in_run_layout(group, record, n_robots, n_members)
+    if case in ("robots reversed", "part of the robots"):
+        assert view is None
+        return
+    merged = np.full((10, 3, n_robots, n_members), np.nan)
+    sm._merge_record(merged, record, index, members)
+    assert np.shares_memory(view, record)
+    np.testing.assert_array_equal(view, merged)

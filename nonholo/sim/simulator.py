@@ -527,16 +527,19 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
             g_stats, g_pairs, g_record = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
                                                         grid)
             most = np.ones(group.members.size, dtype=np.int64)
-        if record and records is None:   # one group of every robot of every member: its record is the record
-            records = g_record if _whole(group, n_robots, n_members) else \
-                np.empty((rec_rows, n_steps + 1, n_robots, n_members))
+        placed = False
+        if record and records is None:   # a group whose record, as it lies in memory, is the run's: no copy
+            records = _in_run_layout(group, g_record, n_robots, n_members) if g_record.shape[0] == rec_rows else None
+            placed = records is not None
+            if not placed:
+                records = np.empty((rec_rows, n_steps + 1, n_robots, n_members))
         members, index = group.members, group.index   # (copies,), (copies, robots of the graph)
         for j in range(index.shape[1]):
             at = _as_slices(index[:, j], members)
             stats[(slice(None), *at)] = g_stats[:, j, :]
             substeps[at] = most
         pair_stats[(slice(None), *_as_slices(component_of[index[:, 0]], members))] = g_pairs
-        if record and records is not g_record:
+        if record and not placed:
             _merge_record(records, g_record, index, members)
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
@@ -586,10 +589,22 @@ def _as_slices(robots: np.ndarray, members: np.ndarray) -> tuple:
     return robots, members
 
 
-def _whole(group: Group, n_robots: int, n_members: int) -> bool:
-    """Whether ``group`` holds every robot of every member, in scenario and member order."""
-    return group.index.shape == (n_members, n_robots) and (group.members == np.arange(n_members)).all() and \
-        (group.index == np.arange(n_robots)).all()
+def _in_run_layout(group: Group, g_record: np.ndarray, n_robots: int, n_members: int) -> np.ndarray | None:
+    """The group's record (rows, N+1, robots of the graph, copies) as the run's (rows, N+1,
+    robots, members), a view of the same memory, where its copies hold every robot of every
+    member in the run's order: robot j of copy b at the place of (robot ``index[b, j]``,
+    member ``members[b]``) — a batch of whole members (j, b), or the lone robots of one
+    scenario (0, b) as its robots (b, 0). Else None (the record is then copied,
+    ``_merge_record``)."""
+    index, members = group.index, group.members
+    copies, robots = index.shape
+    if robots * copies != n_robots * n_members or not g_record.flags.c_contiguous:
+        return None
+    run_place = index * n_members + members[:, None]   # (copies, robots of the graph), C order of the run's
+    own_place = np.arange(robots) * copies + np.arange(copies)[:, None]   # and of the group's own record
+    if not np.array_equal(run_place, own_place):
+        return None
+    return g_record.reshape(g_record.shape[:2] + (n_robots, n_members))
 
 
 class PlannedGroup:
