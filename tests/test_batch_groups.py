@@ -102,10 +102,10 @@ def test_a_batch_of_lone_roots_is_one_group_in_scenario_order():
     (group,) = sm._groups([scenario], *sm._reference_survey(scenario), 0.5)
     assert group.members.tolist() == [0] * 50 and group.index[:, 0].tolist() == list(range(50))
     record = np.arange(10 * 3 * 50.0).reshape(10, 3, 1, 50)   # (copies of one robot: the member's robots in order)
-    view = sm._in_run_layout(group, record, 50, 1)
+    view = sm._in_run_layout(group, record, 10, 50, 1)
     assert np.shares_memory(view, record) and view.shape == (10, 3, 50, 1)
     merged = np.full_like(view, np.nan)
-    sm._merge_record(merged, record, group.index, group.members)
+    sm._merge_record(merged, record, sm._places(group.index, group.members))
     np.testing.assert_array_equal(view, merged)
     assert group.state[0, 0].tolist() == [0.1 * i for i in range(50)]
 
@@ -166,7 +166,7 @@ def test_a_group_s_record_lands_where_its_index_says(layout):
     expected[:10, :, index, members[:, None]] = np.moveaxis(g_record, 2, 3)
     expected[10:, :, index, members[:, None]] = 0.0
     merged = np.full_like(expected, np.nan)
-    sm._merge_record(merged, g_record, index, members)
+    sm._merge_record(merged, g_record, sm._places(index, members))
     np.testing.assert_array_equal(merged, expected)
     assert np.isnan(merged).sum() == merged.size - 15 * 6 * index.size   # (nothing else written)
 
@@ -184,11 +184,11 @@ def test_a_group_s_record_is_the_run_s_without_a_copy_only_where_its_memory_is_i
     n_robots, n_members = (3, 4) if case == "whole members" else (12, 1)
     group = type("G", (), {"index": index, "members": members})()
     record = np.random.default_rng(2).normal(size=(10, 3, index.shape[1], index.shape[0]))
-    view = sm._in_run_layout(group, record, n_robots, n_members)
+    view = sm._in_run_layout(group, record, 10, n_robots, n_members)
     if case in ("robots reversed", "part of the robots"):
         assert view is None
         return
     merged = np.full((10, 3, n_robots, n_members), np.nan)
-    sm._merge_record(merged, record, index, members)
+    sm._merge_record(merged, record, sm._places(index, members))
     assert np.shares_memory(view, record)
     np.testing.assert_array_equal(view, merged)

@@ -1179,8 +1179,8 @@ def make_kernel(law_a, gains_a, law_b, gains_b, followers: bool) -> Kernel:
             leaves E_FINAL and H_FINAL as they were: they are the run's once its last sample
             is taken (``simulate`` always takes it)."""
             (e_mean, e_m2, e_sq, e_max, _, h_sum, h_sq, h_max, _, v_peak, v_peak_t, w_peak, w_peak_t, v_sq, w_sq,
-             sat_v_sum, sat_w_sum, singular_sum, first_singular, sat_any_sum) = add_sample_(old, t, k, v, omega, singular,
-                                                                                           sat_v, sat_w, err1, err2)
+             sat_v_sum, sat_w_sum, singular_sum, first_singular, sat_any_sum) = add_sample_(
+                old, t, k, v, omega, singular, sat_v, sat_w, err1, err2)
             if not limited:
                 sat_v_sum, sat_w_sum, sat_any_sum = old[SAT_V], old[SAT_W], old[SAT_ANY]
             return (e_mean, e_m2, e_sq, e_max, old[E_FINAL], h_sum, h_sq, h_max, old[H_FINAL], v_peak, v_peak_t, w_peak,

@@ -527,20 +527,20 @@ def simulate(scenario: Scenario | Sequence[Scenario], record: bool = True,
             g_stats, g_pairs, g_record = _run_solve_ivp(kernel.evaluate, kernel.scorer(False), first, group, record,
                                                         grid)
             most = np.ones(group.members.size, dtype=np.int64)
-        placed = False
-        if record and records is None:   # a group whose record, as it lies in memory, is the run's: no copy
-            records = _in_run_layout(group, g_record, n_robots, n_members) if g_record.shape[0] == rec_rows else None
-            placed = records is not None
-            if not placed:
-                records = np.empty((rec_rows, n_steps + 1, n_robots, n_members))
+        # a group whose record, as it lies in memory, is the run's hands it over without a copy
+        view = _in_run_layout(group, g_record, rec_rows, n_robots, n_members) if record and records is None else None
+        if view is not None:
+            records = view
+        elif record and records is None:
+            records = np.empty((rec_rows, n_steps + 1, n_robots, n_members))
         members, index = group.members, group.index   # (copies,), (copies, robots of the graph)
-        for j in range(index.shape[1]):
-            at = _as_slices(index[:, j], members)
+        places = _places(index, members)
+        for j, at in enumerate(places):
             stats[(slice(None), *at)] = g_stats[:, j, :]
             substeps[at] = most
         pair_stats[(slice(None), *_as_slices(component_of[index[:, 0]], members))] = g_pairs
-        if record and not placed:
-            _merge_record(records, g_record, index, members)
+        if record and view is None:
+            _merge_record(records, g_record, places)
         if on_divergence == "raise":
             _check_diverged(group, g_stats)
     rows = None
@@ -563,16 +563,21 @@ def _output_rows(stage_rows: np.ndarray, row_start: np.ndarray) -> np.ndarray:
     return stage_rows[row_start]
 
 
-def _merge_record(records: np.ndarray, g_record: np.ndarray, index: np.ndarray, members: np.ndarray) -> None:
-    """Copy a group's record (rows, N+1, robots of the graph, copies) into the run's at robots
-    ``index`` (copies, robots of the graph) of ``members`` (copies,); link rows that the
-    group does not record (a graph without followers, in a run with some) are zeros."""
+def _merge_record(records: np.ndarray, g_record: np.ndarray, places: list[tuple]) -> None:
+    """Copy a group's record (rows, N+1, robots of the graph, copies) into the run's at the
+    ``places`` of its robots (``_places``); link rows that the group does not record (a
+    graph without followers, in a run with some) are zeros."""
     rows = g_record.shape[0]
-    for j in range(index.shape[1]):   # each robot of the graph, in every copy
-        at = _as_slices(index[:, j], members)
+    for j, at in enumerate(places):   # each robot of the graph, in every copy
         records[(slice(None, rows), slice(None), *at)] = g_record[:, :, j, :]
         if records.shape[0] > rows:
             records[(slice(rows, None), slice(None), *at)] = 0.0
+
+
+def _places(index: np.ndarray, members: np.ndarray) -> list[tuple]:
+    """Where each robot j of a group's graph goes in the run's (robot, member) arrays, its
+    copies at robots ``index[:, j]`` of ``members`` (``_as_slices``)."""
+    return [_as_slices(index[:, j], members) for j in range(index.shape[1])]
 
 
 def _as_slices(robots: np.ndarray, members: np.ndarray) -> tuple:
@@ -589,16 +594,17 @@ def _as_slices(robots: np.ndarray, members: np.ndarray) -> tuple:
     return robots, members
 
 
-def _in_run_layout(group: Group, g_record: np.ndarray, n_robots: int, n_members: int) -> np.ndarray | None:
-    """The group's record (rows, N+1, robots of the graph, copies) as the run's (rows, N+1,
-    robots, members), a view of the same memory, where its copies hold every robot of every
-    member in the run's order: robot j of copy b at the place of (robot ``index[b, j]``,
-    member ``members[b]``) — a batch of whole members (j, b), or the lone robots of one
-    scenario (0, b) as its robots (b, 0). Else None (the record is then copied,
-    ``_merge_record``)."""
+def _in_run_layout(group: Group, g_record: np.ndarray, rows: int, n_robots: int,
+                   n_members: int) -> np.ndarray | None:
+    """The group's record (rows, N+1, robots of the graph, copies) as the run's (``rows``,
+    N+1, robots, members), a view of the same memory, where it has the run's rows and its
+    copies hold every robot of every member in the run's order: robot j of copy b at the
+    place of (robot ``index[b, j]``, member ``members[b]``) — a batch of whole members
+    (j, b), or the lone robots of one scenario (0, b) as its robots (b, 0). Else None (the
+    record is then copied, ``_merge_record``)."""
     index, members = group.index, group.members
     copies, robots = index.shape
-    if robots * copies != n_robots * n_members or not g_record.flags.c_contiguous:
+    if g_record.shape[0] != rows or robots * copies != n_robots * n_members or not g_record.flags.c_contiguous:
         return None
     run_place = index * n_members + members[:, None]   # (copies, robots of the graph), C order of the run's
     own_place = np.arange(robots) * copies + np.arange(copies)[:, None]   # and of the group's own record
@@ -663,7 +669,8 @@ def score_states(scenario: Scenario, planned: list[PlannedGroup], states: np.nda
         score(g_states, group.fields, group.limits, item.rows, item.targets, group.offsets, group.kinds, group.order,
               group.parents, group.initial_branches(), scenario.sin_floor, group.d_max, g_stats, g_pairs, g_record,
               scenario.hold_every, g_helds)
-        _merge_record(records, g_record, np.array(columns), np.zeros(len(columns), dtype=np.int64))   # (member 0)
+        member_0 = np.zeros(len(columns), dtype=np.int64)
+        _merge_record(records, g_record, _places(np.array(columns), member_0))
         for b, indices in enumerate(columns):
             stats[:, indices, 0] = g_stats[:, :, b]
             pair_stats[:, component_of[indices[0]], 0] = g_pairs[:, b]
